@@ -1,0 +1,1 @@
+"""Geometry: pure, batched tensor functions (rotations, skinning, ...)."""

@@ -1,0 +1,1 @@
+"""Motion: the Motion type, BVH import and retargeting, built-in clips."""
