@@ -35,7 +35,7 @@ _NAME_ALIASES = {
 }  # fmt: skip
 _ROTATIONS = ("Xrotation", "Yrotation", "Zrotation")
 _POSITIONS = ("Xposition", "Yposition", "Zposition")
-# Python's float() also takes "nan", "1_0" or "١"; a BVH number is plainer than that.
+# Python's float() also takes "nan", "1_0" or non-ASCII digits; a BVH number is plainer.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NONFINITE = ("nan", "inf", "infinity")
 # A frame line: numbers separated by blanks (the lookahead stops "1.5.2" reading as two).
@@ -214,7 +214,7 @@ def _parse_channels(path: Path, i: int, joint: _Joint, tokens: list[str]) -> lis
             raise _at(path, i, f"{unknown} (known: {known})")
     # Any order is fine (it is the rotation order), but each axis exactly once; positions
     # only on the root, where they are required.
-    need = _ROTATIONS + (_POSITIONS if joint.parent == -1 else ())
+    need = (_POSITIONS if joint.parent == -1 else ()) + _ROTATIONS
     if sorted(channels) != sorted(need):
         who = f"{'root ' if joint.parent == -1 else ''}joint {joint.name}"
         found = " ".join(channels) or "none"
@@ -235,10 +235,11 @@ def _check_skeleton(path: Path, joints: list[_Joint]) -> list[int]:
     order = [names.index(n) for n in CMU_JOINT_NAMES]
     for name, file_index, want in zip(CMU_JOINT_NAMES, order, CMU_JOINT_PARENTS):
         joint = joints[file_index]
-        have = joints[joint.parent].name if joint.parent >= 0 else "none (it is the ROOT)"
-        expected = CMU_JOINT_NAMES[want] if want >= 0 else "none (it should be the ROOT)"
-        if have.split()[0] != expected.split()[0]:
-            wrong = f"joint {name} has parent {have}, expected {expected}"
+        have = joints[joint.parent].name if joint.parent >= 0 else None
+        expected = CMU_JOINT_NAMES[want] if want >= 0 else None
+        if have != expected:
+            wrong = f"joint {name} has parent {have or 'none (it is the ROOT)'}, "
+            wrong += f"expected {expected or 'none (it should be the ROOT)'}"
             raise _at(path, joint.line - 1, wrong)
     return order
 

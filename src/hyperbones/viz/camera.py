@@ -107,7 +107,7 @@ def follow_cameras(
     azimuth_deg: float = 30.0,
     elevation_deg: float = 10.0,
     fov_y_deg: float = 40.0,
-    margin: float = 1.15,
+    margin: float = 1.05,
     time_constant: float = 0.5,
 ) -> list[Camera]:
     """One camera per frame, following the character at a fixed distance.

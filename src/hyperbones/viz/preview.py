@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
+import numbers
 import os
 import uuid
 from dataclasses import dataclass
@@ -218,14 +219,15 @@ def render_preview(
     """Render all frames to an H.264 MP4 (and `<stem>_sheet.png` when contact_sheet).
 
     meshes share one follow camera per frame; size is the square frame edge in
-    pixels (rounded up to even, as yuv420p needs). Outputs are written to temp
+    pixels (rounded up to even, as yuv420p needs); title, when given, is drawn in
+    the top-left of every frame and above the sheet. Outputs are written to temp
     files beside the targets and renamed into place only when complete, so a
     failure leaves neither partial nor temp files. Returns (mp4 path, sheet path or None).
     """
     out_path = Path(out_path)
     if out_path.suffix.lower() != ".mp4":
         raise ParameterError(f"preview output must end in .mp4, got {out_path.name!r}")
-    if not (isinstance(fps, (int, float)) and math.isfinite(fps) and fps > 0):
+    if not (isinstance(fps, numbers.Real) and math.isfinite(fps) and fps > 0):
         raise ParameterError(f"fps must be a positive number, got {fps!r}")
     if int(size) < 16:
         raise ParameterError(f"size must be at least 16 pixels, got {size}")
