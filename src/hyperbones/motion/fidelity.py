@@ -71,5 +71,5 @@ def retarget_report(motion: Motion, body: Body, clip: BvhClip, source_fps: float
         "segments": segments,
         "limb_mean": float(limbs.mean()),
         "limb_p95": float(torch.quantile(limbs, 0.95)),
-        "steps": foot_slip_per_step(body, posed.skinning_transforms),
+        "steps": foot_slip_per_step(body, posed.skinning_transforms, motion.fps),
     }

@@ -43,19 +43,58 @@ def stance_intervals(in_contact: torch.Tensor, min_frames: int = 3) -> list[tupl
     return intervals
 
 
+def contact_slides(points: torch.Tensor, contact_height: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """How the part of a foot touching the ground slides between frames.
+
+    Args:
+        points: (T,n,3) posed sole vertices of one foot.
+        contact_height: a vertex lower than this touches the ground.
+
+    Returns:
+        (T-1,2) mean horizontal displacement of the vertices touching in both frames (zero
+        when none are: the foot rolled onto another part), and (T,) whether any vertex touches.
+    """
+    touching = points[..., 2] < contact_height
+    both = (touching[1:] & touching[:-1]).float()
+    moved = points[1:, :, :2] - points[:-1, :, :2]
+    count = both.sum(-1, keepdim=True)
+    slide = (moved * both[..., None]).sum(1) / count.clamp(min=1)
+    return slide, touching.any(-1)
+
+
+def planted(points: torch.Tensor, fps: float, contact_height: float, max_speed: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Stance detection for one foot: near the ground and slow.
+
+    Args:
+        points: (T,n,3) posed sole vertices.
+
+    Returns:
+        (T-1,2) slides (see ``contact_slides``) and (T,) stance flags: some sole vertex lower
+        than ``contact_height`` while the sole centre moves slower than ``max_speed`` m/s
+        (a swinging foot may skim the floor, but it is not standing on it).
+    """
+    slide, touching = contact_slides(points, contact_height)
+    centre = points[..., :2].mean(1)
+    speed = (centre[1:] - centre[:-1]).norm(dim=-1) * fps
+    speed = torch.cat([speed[:1], speed]) if len(speed) else torch.zeros(len(points))
+    return slide, touching & (speed < max_speed)
+
+
 def foot_slip_per_step(
     body: Body,
     skinning_transforms: torch.Tensor,
+    fps: float,
     contact_height: float = 0.015,
+    max_speed: float = 1.0,
     min_frames: int = 3,
 ) -> list[dict]:
     """How far the part of each foot that touches the ground slides during each step.
 
     A sole vertex touches the ground when it is lower than ``contact_height``; a foot is in
-    stance while any of its sole vertices touches. Between two consecutive stance frames,
-    the slide is the mean horizontal displacement of the vertices touching in both frames
-    (none in common: the foot rolled onto another part, no slide counted). A step's slip
-    is the sum of its slides, so a planted foot that rolls heel to toe scores ~0.
+    stance while any of its sole vertices touches and it moves slower than ``max_speed``
+    (see ``planted``). A step's slip is the length of the path
+    the touching part slides along over the stance (see ``contact_slides``), so a planted
+    foot that rolls heel to toe scores ~0.
 
     Args:
         body: the body.
@@ -66,12 +105,8 @@ def foot_slip_per_step(
     """
     steps = []
     for side, points in sole_points(body, skinning_transforms).items():
-        touching = points[..., 2] < contact_height  # (T,n)
-        both = touching[1:] & touching[:-1]
-        moved = (points[1:, :, :2] - points[:-1, :, :2]).norm(dim=-1)
-        count = both.sum(-1)
-        slide = torch.where(count > 0, (moved * both).sum(-1) / count.clamp(min=1), torch.zeros_like(moved[:, 0]))
-        for start, stop in stance_intervals(touching.any(-1), min_frames):
-            steps.append({"side": side, "start": start, "stop": stop,
-                          "slip": float(slide[start:stop - 1].sum())})
+        slide, stance = planted(points, fps, contact_height, max_speed)
+        length = slide.norm(dim=-1)
+        for start, stop in stance_intervals(stance, min_frames):
+            steps.append({"side": side, "start": start, "stop": stop, "slip": float(length[start:stop - 1].sum())})
     return steps

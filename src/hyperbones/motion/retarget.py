@@ -25,6 +25,7 @@ from hyperbones.body.skeleton import JOINT_INDEX, JOINT_NAMES, JOINT_PARENTS
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import minimal_rotation
 from hyperbones.motion.bvh import BvhClip, bvh_forward_kinematics, read_bvh
+from hyperbones.motion.footlock import lock_feet
 from hyperbones.motion.ground import sole_points
 from hyperbones.motion.motion import DEFAULT_FPS, Motion, resample_poses
 
@@ -110,6 +111,7 @@ def retarget_bvh(
     body: Body,
     fps: float = DEFAULT_FPS,
     source_fps: float | None = None,
+    lock_feet_in_stance: bool = True,
 ) -> Motion:
     """Read a CMU BVH file and retarget it onto ``body``.
 
@@ -120,6 +122,7 @@ def retarget_bvh(
             T-pose frame.
         source_fps: the rate the clip was captured at, when its header is wrong (some CMU
             trials were captured at 60 fps but say 120).
+        lock_feet_in_stance: hold planted feet in place (``hyperbones.motion.footlock``).
 
     Returns:
         The Motion, named after the file.
@@ -146,6 +149,8 @@ def retarget_bvh(
 
     motion = resample_poses(joint_rotations.float(), root.float(), clip_fps, fps, Path(path).stem)
     motion = place_on_ground(motion, body)
+    if lock_feet_in_stance:
+        motion = lock_feet(motion, body)
     _warn_if_too_fast(motion, path, clip_fps)
     return motion
 

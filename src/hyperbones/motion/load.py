@@ -1,0 +1,54 @@
+"""One entry point for every motion source: a built-in name or a CMU .bvh file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from hyperbones.body.anny_body import Body
+from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.motion.builtin import BUILTINS, builtin_motion
+from hyperbones.motion.motion import DEFAULT_FPS, Motion
+from hyperbones.motion.retarget import retarget_bvh
+
+DEFAULT_BLEND_IN = 15
+
+
+def load_motion(
+    source: str,
+    body: Body,
+    *,
+    fps: float = DEFAULT_FPS,
+    blend_in: int = DEFAULT_BLEND_IN,
+    speed: float | None = None,
+    duration: float | None = None,
+    hold: float = 0.0,
+    source_fps: float | None = None,
+) -> Motion:
+    """Load a motion fitted to ``body``.
+
+    Args:
+        source: a built-in name (see ``hyperbones.motion.builtin.BUILTINS``) or a path to a
+            CMU BVH file.
+        fps: frame rate of the result.
+        blend_in: frames of transition from the A-pose prepended (0: none).
+        speed, duration: built-in clip parameters (defaults per clip).
+        hold: seconds of stillness appended at the end.
+        source_fps: override of a BVH header's frame rate.
+    """
+    if blend_in < 0:
+        raise ParameterError(f"--blend-in must be >= 0 frames, got {blend_in}")
+    if fps <= 0:
+        raise ParameterError(f"--fps must be positive, got {fps}")
+    if source in BUILTINS:
+        motion = builtin_motion(source, body, speed=speed, duration=duration, hold=0.0, fps=fps)
+    elif source.lower().endswith(".bvh") or Path(source).exists():
+        if speed is not None or duration is not None:
+            raise ParameterError("--speed and --duration apply to built-in motions, not to BVH files")
+        if Path(source).suffix.lower() != ".bvh":
+            raise InputFileError(source, "not a .bvh file (motion files must be CMU BVH)")
+        motion = retarget_bvh(source, body, fps=fps, source_fps=source_fps)
+    else:
+        raise ParameterError(f"unknown motion {source!r}: give a built-in name ({', '.join(BUILTINS)}) or a .bvh file")
+    if hold < 0:
+        raise ParameterError(f"--hold must be >= 0, got {hold}")
+    return motion.blend_in(blend_in, body.rest_root).with_hold(int(round(hold * fps)))
