@@ -5,8 +5,8 @@ actor's feet slid a little during stance (joint-centre noise, a body of other
 proportions), and a sliding sole is the most visible artefact of a retarget. Here each
 stance's slide is measured on the sole vertices that touch the ground, the ankle target
 is shifted back by the accumulated slide, and thigh and shin are re-solved by two-bone IK
-in the knee's current bend plane. Feet keep their world rotation; the correction fades
-out over the following swing.
+in the knee's current bend plane. A sole below the floor is raised onto it the same way.
+Feet keep their world rotation; the correction fades out over the following swing.
 """
 
 from __future__ import annotations
@@ -20,6 +20,9 @@ from hyperbones.motion.ground import planted, sole_points, stance_intervals
 from hyperbones.motion.motion import Motion
 
 SIDES = {"left": "Left", "right": "Right"}
+# Largest lift of a sunken sole (metres): the ground estimate is good to a few cm on
+# walks; beyond that (a cartwheel) the estimate, not the foot, is what is wrong.
+MAX_RAISE = 0.03
 
 
 def _corrections(slide: torch.Tensor, stances: list[tuple[int, int]], num_frames: int) -> torch.Tensor:
@@ -56,10 +59,13 @@ def lock_feet(motion: Motion, body: Body, contact_height: float = 0.025, max_spe
         if not stances:
             continue
         shift = _corrections(slide, stances, motion.num_frames)
+        # A sole below the floor (the smoothed ground estimate can dip under a stance) is
+        # raised until it touches (at most MAX_RAISE); continuous in time because the sole height is.
+        raise_by = (-points[..., 2].amin(-1)).clamp(min=0, max=MAX_RAISE)
         hip = posed.joint_positions[:, J[f"{prefix}UpLeg"]]
         knee = posed.joint_positions[:, J[f"{prefix}Leg"]]
         ankle = posed.joint_positions[:, J[f"{prefix}Foot"]]
-        target = ankle + torch.cat([shift, torch.zeros(len(shift), 1)], dim=-1)
+        target = ankle + torch.cat([shift, raise_by[:, None]], dim=-1)
         new_knee = _solve_knee(hip, knee, ankle, target,
                                body.segment_length(f"{prefix}UpLeg", f"{prefix}Leg"),
                                body.segment_length(f"{prefix}Leg", f"{prefix}Foot"))
