@@ -20,7 +20,7 @@ import torch
 from hyperbones.body.anny_body import Body
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_x, rot_y, rot_z, slerp_rotmat
-from hyperbones.motion.legs import SIDES, LegRig, arm_pose
+from hyperbones.motion.legs import SIDES, LegRig
 from hyperbones.motion.motion import DEFAULT_FPS, Motion
 
 GRAVITY = 9.81
@@ -154,8 +154,8 @@ def _locomotion(body: Body, name: str, speed: float, duration: float, fps: float
     torso = rot_x(-lean * env) @ rot_z(-0.12 * env * torch.sin(phase))
     head = rot_z(0.06 * env * torch.sin(phase))
     arms = {
-        side: arm_pose(arm_swing * env * torch.sin(phase + (0 if side == "right" else math.pi)),
-                       elbow * env + 0.15 * env * (1 + torch.sin(phase + (0 if side == "right" else math.pi))), side)
+        side: rig.arm(side, arm_swing * env * torch.sin(phase + (0 if side == "right" else math.pi)),
+                      elbow * env + 0.15 * env * (1 + torch.sin(phase + (0 if side == "right" else math.pi))))
         for side in SIDES
     }
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, name, toes)
@@ -201,7 +201,7 @@ def idle(body: Body, speed: float = 1.0, duration: float = 8.0, fps: float = DEF
     pelvis = rot_y(0.05 * env * torch.sin(w)) @ rot_z(0.04 * env * torch.sin(0.5 * w))
     torso = rot_y(-0.07 * env * torch.sin(w)) @ rot_x(0.02 * env * torch.sin(4 * w))
     head = rot_z(0.1 * env * torch.sin(0.7 * w)) @ rot_y(0.02 * env * torch.sin(w))
-    arms = {side: arm_pose(0.08 * env * torch.sin(w + (0 if side == "left" else 1.0)), 0.2 * env, side, 0.5)
+    arms = {side: rig.arm(side, 0.08 * env * torch.sin(w + (0 if side == "left" else 1.0)), 0.15 + 0.1 * env)
             for side in SIDES}
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, "idle")
 
@@ -217,7 +217,7 @@ def arm_swing(body: Body, speed: float = 1.0, duration: float = 6.0, fps: float 
     pelvis = rot_z(0.06 * env * torch.sin(w))
     torso = rot_z(0.15 * env * torch.sin(w))
     head = rot_z(-0.15 * env * torch.sin(w))
-    arms = {side: arm_pose(0.9 * env * torch.sin(w + (0 if side == "left" else math.pi)), 0.3 * env, side, 0.4)
+    arms = {side: rig.arm(side, 0.9 * env * torch.sin(w + (0 if side == "left" else math.pi)), 0.3 * env)
             for side in SIDES}
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, "arm-swing")
 
@@ -246,7 +246,7 @@ def sit(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEFA
     pelvis = rot_x(-0.6 * lean)
     torso = rot_x(-0.5 * lean)
     head = rot_x(0.4 * lean)
-    arms = {side: arm_pose(arms_forward, 0.3 + 0.5 * arms_forward, side, 0.35) for side in SIDES}
+    arms = {side: rig.arm(side, arms_forward, 0.3 + 0.5 * arms_forward) for side in SIDES}
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, "sit")
 
 
@@ -267,24 +267,24 @@ def jump(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEF
         s = t - t0
         crouching = (s >= 0) & (s < crouch)
         dz = torch.where(crouching, -0.14 * _smoothstep(s / crouch), dz)
-        arm = torch.where(crouching, -0.5 * _smoothstep(s / crouch), arm)
         pushing = (s >= crouch) & (s < crouch + push)
         u = (s - crouch) / push
         # Cubic from the crouch (rest) to the take-off height 0.04 with the take-off speed.
         h0, h1, v1 = -0.14, 0.04, takeoff_speed * push
         cubic = h0 + (3 * (h1 - h0) - v1) * u**2 + (v1 - 2 * (h1 - h0)) * u**3
         dz = torch.where(pushing, cubic, dz)
-        arm = torch.where(pushing, -0.5 + 2.3 * u * u * (1.5 - 0.5 * u), arm)
         flying = (s >= crouch + push) & (s < crouch + push + flight)
         f = s - crouch - push
         dz = torch.where(flying, 0.04 + takeoff_speed * f - 0.5 * GRAVITY * f**2, dz)
-        arm = torch.where(flying, 1.8 - 1.0 * _smoothstep(f / flight), arm)
         landing = (s >= crouch + push + flight) & (s < period)
         g = ((s - crouch - push - flight) / land).clamp(max=1.0)
         # Landing: arrive at +0.04 moving down at take-off speed, absorb to -0.1, rise back to 0.
         absorb = 0.04 - takeoff_speed * land * g * (1 - g) ** 2 - 0.1 * _smoothstep(g / 0.45) * (1 - _smoothstep((g - 0.45) / 0.55)) - 0.04 * _smoothstep(g)
         dz = torch.where(landing, absorb, dz)
-        arm = torch.where(landing, 0.8 * (1 - _smoothstep(g)), arm)
+        # Arms: back during the crouch, up through take-off, down again on landing.
+        inside = (s >= 0) & (s < period)
+        arm_keys = [0.0, crouch, crouch + push + 0.12, crouch + push + flight, period - 0.1 / speed]
+        arm = torch.where(inside, _keyframes(s, arm_keys, [0.0, -0.5, 1.2, 0.6, 0.0]), arm)
     root_z = base + dz
     for side in SIDES:
         # The feet leave the ground only once the hips rise above their standing height.
@@ -296,7 +296,7 @@ def jump(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEF
     pelvis = rot_x(-0.35 * crouch_amount)
     torso = rot_x(-0.25 * crouch_amount)
     head = rot_x(0.3 * crouch_amount)
-    arms = {side: arm_pose(arm, 0.3 + 0.2 * crouch_amount, side, 0.3) for side in SIDES}
+    arms = {side: rig.arm(side, arm, 0.3 + 0.2 * crouch_amount) for side in SIDES}
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, "jump")
 
 

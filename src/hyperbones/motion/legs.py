@@ -10,8 +10,10 @@ import torch
 
 from hyperbones.body.anny_body import Body
 from hyperbones.body.skeleton import JOINT_INDEX as J
-from hyperbones.body.skeleton import JOINT_PARENTS, NUM_JOINTS
-from hyperbones.geometry.rotations import rot_x, rot_y
+from hyperbones.body.skeleton import NUM_JOINTS
+import math
+
+from hyperbones.geometry.rotations import minimal_rotation, rot_x
 
 SIDES = {"left": "Left", "right": "Right"}
 # Fraction of the full leg length a solved leg may use, so knees never lock straight
@@ -45,6 +47,30 @@ class LegRig:
             sole = body.rest_vertices[body.foot_vertex_indices[s]]
             self.heel[s] = torch.tensor([float(self.ankle[s][0]), float(sole[:, 1].max()), 0.0])
         self.leg_length = min(float(self.thigh[s].norm() + self.shin[s].norm()) for s in SIDES)
+        self.upper_arm = {s: rest[J[f"{p}ForeArm"]] - rest[J[f"{p}Arm"]] for s, p in SIDES.items()}
+        self.forearm = {s: rest[J[f"{p}Hand"]] - rest[J[f"{p}ForeArm"]] for s, p in SIDES.items()}
+
+    def arm(self, side: str, swing: torch.Tensor, elbow: torch.Tensor, spread: float = 0.15):
+        """Shoulder and elbow rotations (relative to the chest) of an arm hanging by the side.
+
+        Anny's A-pose arm is raised 42 degrees with its forearm bent forward, so the pose is
+        set by directions: the upper arm hangs (tilted out by ``spread``), swings forward by
+        ``swing`` radians, the forearm bends forward by ``elbow`` radians; each bone takes
+        the smallest rotation from its rest direction.
+
+        Args:
+            swing, elbow: (T,) radians.
+
+        Returns:
+            (T,3,3) shoulder rotation, (T,3,3) elbow rotation relative to the upper arm.
+        """
+        sign = 1.0 if side == "left" else -1.0
+        hang = torch.tensor([sign * math.sin(spread), 0.0, -math.cos(spread)])
+        upper_dir = rot_x(-swing) @ hang
+        fore_dir = rot_x(-swing - elbow) @ hang
+        shoulder = minimal_rotation(self.upper_arm[side].expand_as(upper_dir), upper_dir)
+        fore = minimal_rotation(self.forearm[side].expand_as(fore_dir), fore_dir)
+        return shoulder, shoulder.transpose(-1, -2) @ fore
 
     def solve(
         self,
@@ -157,17 +183,4 @@ class LegRig:
         return ankle, foot
 
 
-def arm_pose(swing: torch.Tensor, elbow: torch.Tensor, side: str, adduction: float = 0.5):
-    """Shoulder and elbow rotations for an arm hanging by the side.
-
-    Args:
-        swing: (T,) forward swing of the upper arm, radians (> 0 forward).
-        elbow: (T,) elbow flexion, radians.
-        adduction: radians the arm is brought in from the A-pose towards the body.
-    """
-    sign = 1.0 if side == "left" else -1.0
-    shoulder = rot_x(-swing) @ rot_y(torch.full_like(swing, sign * adduction))
-    return shoulder, rot_x(-elbow)
-
-
-__all__ = ["LegRig", "arm_pose", "frame_from", "JOINT_PARENTS"]
+__all__ = ["LegRig", "frame_from"]

@@ -1,0 +1,103 @@
+"""The command line: output contracts, one-line errors, render and demo."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import imageio.v3 as iio
+import numpy as np
+import pytest
+import torch
+
+from conftest import cmu_clip
+from hyperbones.body.skeleton import JOINT_NAMES, LIMB_SEGMENTS
+from hyperbones.cli import main
+
+
+def _run(capsys, *argv):
+    code = main(list(argv))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_motion_builtin_npz_contract(tmp_path, capsys):
+    out = tmp_path / "walk.npz"
+    code, stdout, _ = _run(capsys, "motion", "walk", "--duration", "2", "--body", "weight=0.8", "--out", str(out))
+    assert code == 0 and "wrote" in stdout
+    data = np.load(out)
+    assert list(data["joint_names"]) == list(JOINT_NAMES)
+    frames = data["joint_positions"].shape[0]
+    assert frames == 61 + 15  # 2 s at 30 fps plus the default 15-frame blend-in
+    assert data["joint_positions"].shape == (frames, 31, 3)
+    rot = torch.as_tensor(data["joint_rotations"])
+    assert rot.shape == (frames, 31, 3, 3)
+    assert torch.allclose(rot @ rot.transpose(-1, -2), torch.eye(3).expand_as(rot), atol=1e-4)
+    assert float(data["fps"]) == 30.0
+    assert not list(tmp_path.glob(".*tmp*"))  # no temporary file left behind
+
+
+def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
+    from test_motion_retarget import _angles, _reference_positions
+
+    path = cmu_clip("16_35")
+    out = tmp_path / "run.npz"
+    assert _run(capsys, "motion", str(path), "--blend-in", "0", "--out", str(out))[0] == 0
+    positions = torch.as_tensor(np.load(out)["joint_positions"])
+    reference = _reference_positions(path, len(positions), None)
+    for arm in ("left forearm", "right upper arm"):
+        assert _angles(positions, reference, LIMB_SEGMENTS[arm]).max() < 0.05
+
+
+@pytest.mark.parametrize("argv, phrase", [
+    (["motion", "walk", "--body", "foo=1", "--out", "x.npz"], "--body: unknown key 'foo'"),
+    (["motion", "walk", "--body", "weight=2", "--out", "x.npz"], "out of range"),
+    (["motion", "moonwalk", "--out", "x.npz"], "unknown motion 'moonwalk'"),
+    (["motion", "walk", "--out", "x.txt"], "must end in .npz"),
+    (["motion", "walk", "--blend-in", "-3", "--out", "x.npz"], "--blend-in"),
+    (["motion", "walk"], "--out FILE.npz is required"),
+    (["motion", "missing.bvh", "--out", "x.npz"], "missing.bvh: file not found"),
+])
+def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = _run(capsys, *argv)
+    assert code == 2
+    assert err.startswith("hyperbones: error:") and phrase in err and err.count("\n") == 1
+    assert not list(tmp_path.iterdir())
+
+
+def test_malformed_bvh_names_the_file(tmp_path, capsys):
+    bad = tmp_path / "broken.bvh"
+    bad.write_text("HIERARCHY\nROOT Hips\n{\n")
+    code, _, err = _run(capsys, "motion", str(bad), "--out", str(tmp_path / "x.npz"))
+    assert code == 2 and "broken.bvh" in err and err.count("\n") == 1
+
+
+def test_render_writes_video_and_sheet(tmp_path, capsys):
+    out = tmp_path / "idle.mp4"
+    code, stdout, _ = _run(capsys, "render", "idle", "--duration", "1", "--blend-in", "0", "--size", "128",
+                           "--quiet", "--out", str(out))
+    assert code == 0
+    frames = iio.imread(out)
+    assert frames.shape[0] == 31 and frames.shape[1:3] == (128, 128)
+    assert (tmp_path / "idle_sheet.png").exists()
+    # The body is drawn: frames are not just background.
+    assert frames[0].std() > 10
+
+
+def test_demo_and_console_script(tmp_path):
+    """The README's main job, through the installed console script."""
+    exe = Path(sys.executable).with_name("hyperbones")
+    result = subprocess.run([str(exe), "demo", "--quiet", "--out", str(tmp_path / "demo")],
+                            capture_output=True, text=True, timeout=600)
+    assert result.returncode == 0, result.stderr
+    for name in ("preview.mp4", "preview_sheet.png", "motion.npz"):
+        assert (tmp_path / "demo" / name).stat().st_size > 1000
+    assert "preview.mp4" in result.stdout
+
+
+def test_help_explains_commands(capsys):
+    with pytest.raises(SystemExit):
+        main(["--help"])
+    out = capsys.readouterr().out
+    for verb in ("demo", "motion", "render", "check-retarget"):
+        assert verb in out
