@@ -6,7 +6,7 @@ import torch
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rotation_angle_deg
 from hyperbones.motion.builtin import BUILTINS, builtin_motion
-from hyperbones.motion.ground import sole_points
+from hyperbones.motion.ground import sole_points, still_frames
 
 REQUIRED = {"walk", "run", "jump", "turn", "idle", "arm-swing", "sit"}
 
@@ -34,15 +34,7 @@ def test_feet_on_the_ground(clips, body, name):
     for side, points in sole_points(body, posed.skinning_transforms).items():
         lowest = points[..., 2].amin(-1)
         assert lowest.min() > -0.01, (side, float(lowest.min()))
-        centre = points.mean(1)
-        speed = torch.cat([torch.zeros(1), (centre[1:] - centre[:-1]).norm(dim=-1) * motion.fps])
-        still = speed < 0.05
-        # Frames inside runs of at least three still frames.
-        run = still[2:] & still[1:-1] & still[:-2]
-        standing = torch.zeros_like(still)
-        standing[1:-1] |= run
-        standing[2:] |= run
-        standing[:-2] |= run
+        standing = still_frames(points, motion.fps)
         assert standing.any(), side
         assert lowest[standing].max() < 0.01, (side, float(lowest[standing].max()))
 
@@ -84,3 +76,21 @@ def test_bad_parameters(body):
         builtin_motion("run", body, speed=-1.0)
     with pytest.raises(ParameterError, match="--duration"):
         builtin_motion("walk", body, duration=0.1)
+
+
+@pytest.mark.parametrize("shape", ["age=0,height=0", "gender=1,weight=1,height=0", "gender=0,height=1,muscle=1,proportions=1"])
+def test_any_body_shape_moves_cleanly(shape):
+    """Clips scale with the leg length, so an infant or a tall body is as clean as the default one."""
+    from hyperbones.body import BodyShape, body_for
+
+    body = body_for(BodyShape.parse(shape))
+    for name in BUILTINS:
+        motion = builtin_motion(name, body, hold=0.5)
+        steps = rotation_angle_deg(motion.joint_rotations[1:], motion.joint_rotations[:-1])
+        assert steps.max() < 30.0, name
+        posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
+        for points in sole_points(body, posed.skinning_transforms).values():
+            heights = points[..., 2].amin(-1)
+            assert heights.min() > -0.01, name
+            still = still_frames(points, motion.fps)
+            assert heights[still].max() < 0.01, name

@@ -94,6 +94,13 @@ def cmd_check_retarget(args) -> int:
     return 0
 
 
+def cmd_check_builtins(args) -> int:
+    from hyperbones.motion.report import builtin_table
+
+    print(builtin_table(args.body, hold=args.hold))
+    return 0
+
+
 def _source_fps_pair(text: str):
     name, _, value = text.partition("=")
     try:
@@ -135,6 +142,11 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--source-fps", type=_source_fps_pair, action="append", metavar="CLIP=FPS",
                        help="capture rate of a clip whose header is wrong, e.g. 74_06=60 (repeatable)")
     check.set_defaults(func=cmd_check_retarget)
+
+    builtins = sub.add_parser("check-builtins", help="table of smoothness and ground contact of the built-in motions")
+    builtins.add_argument("--body", default=None, help=BODY_HELP)
+    builtins.add_argument("--hold", type=float, default=1.0, help="seconds of hold appended (default: 1)")
+    builtins.set_defaults(func=cmd_check_builtins)
     return parser
 
 

@@ -24,6 +24,12 @@ from hyperbones.motion.legs import SIDES, LegRig
 from hyperbones.motion.motion import DEFAULT_FPS, Motion
 
 GRAVITY = 9.81
+# Foot pitch (radians) at toe-off (heel up, > 0) and at heel strike (toes up, < 0).
+TOE_OFF_ROLL = 0.45
+HEEL_STRIKE_ROLL = -0.25
+# Leg length (hip to ankle, metres) of the default Anny body, at which the gait constants
+# below were tuned; other bodies step proportionally (cadence x this / their leg length).
+REFERENCE_LEG_LENGTH = 0.794
 
 
 def _smoothstep(x: torch.Tensor) -> torch.Tensor:
@@ -56,6 +62,7 @@ class _Gait:
 
     cycle_hz: float
     duty: torch.Tensor  # (T,) per frame, in (0, 1]
+    intensity: torch.Tensor  # (T,) 0 standing .. 1 full gait; scales the foot roll
     swing_height: float
     phase_offset: dict[str, float]
 
@@ -97,7 +104,7 @@ def _foot_tracks(rig: LegRig, t, path_xy, path_yaw, gait: _Gait, fps: float):
                 if n > 3 and float(gait.duty[a:b].mean()) < 0.999:
                     u = torch.linspace(0, 1, n)
                     # Heel strike (toes up) eases flat; late stance lifts the heel onto the ball.
-                    roll[a:b] = -0.25 * _smoothstep(1 - u / 0.2) + 0.45 * _smoothstep((u - 0.65) / 0.35)
+                    roll[a:b] = HEEL_STRIKE_ROLL * _smoothstep(1 - u / 0.2) + TOE_OFF_ROLL * _smoothstep((u - 0.65) / 0.35)
                 continue
             prev_k, next_k = k - 1, k + 1
             start_xy = plant_xy.get(prev_k, plant_xy.get(next_k))
@@ -111,16 +118,18 @@ def _foot_tracks(rig: LegRig, t, path_xy, path_yaw, gait: _Gait, fps: float):
             ground_xy[a:b] = start_xy + w[:, None] * (end_xy - start_xy)
             yaw[a:b] = start_yaw + w * (end_yaw - start_yaw)
             span = float((end_xy - start_xy).norm())
-            lift[a:b] = min(gait.swing_height, 0.04 + 0.25 * span) * torch.sin(math.pi * u)
-            # Toe down after lift-off, toe up before landing; zero at both ends.
-            roll[a:b] = 0.35 * torch.sin(2 * math.pi * u) * torch.sin(math.pi * u)
+            lift[a:b] = min(gait.swing_height, 0.3 * gait.swing_height + 0.25 * span) * torch.sin(math.pi * u)
+            # From the toe-off roll to the heel-strike roll, toe down early and toe up late.
+            roll[a:b] = TOE_OFF_ROLL * (1 - w) + HEEL_STRIKE_ROLL * w + 0.3 * torch.sin(2 * math.pi * u) * torch.sin(math.pi * u)
         yaw_rot = rot_z(yaw)
+        roll = roll * gait.intensity  # short first and last steps barely roll
         ankle, foot = rig.planted_foot(side, ground_xy, yaw_rot, roll)
         # In swing, lift the whole foot; the roll pivot is then irrelevant.
         ankle = ankle + lift[:, None] * torch.tensor([0.0, 0.0, 1.0])
-        # Toes stay flat while the heel lifts in stance; in swing they follow the foot.
+        # Toes stay level while the heel is up (the toe joint bends), and follow the foot
+        # when the toes are up; one rule for stance and swing keeps them continuous.
         ankles[side], feet[side] = ankle, foot
-        toes[side] = torch.where((lift > 0)[:, None, None], foot, yaw_rot @ rot_x(roll.clamp(max=0)))
+        toes[side] = yaw_rot @ rot_x(roll.clamp(max=0))
     return ankles, feet, toes
 
 
@@ -137,6 +146,7 @@ def _locomotion(body: Body, name: str, speed: float, duration: float, fps: float
                 duty: float, swing_height: float, turn_rate: float = 0.0, lean: float = 0.05,
                 arm_swing: float = 0.35, elbow: float = 0.25, bob: float = 0.015) -> Motion:
     rig = LegRig(body)
+    k = body_scale(body)
     t = torch.arange(int(round(duration * fps)) + 1, dtype=torch.float32) / fps
     cycle = 1.0 / cadence
     env = _envelope(t, duration, ramp=min(cycle, duration / 3))
@@ -146,11 +156,11 @@ def _locomotion(body: Body, name: str, speed: float, duration: float, fps: float
     forward = torch.stack([-torch.sin(yaw), -torch.cos(yaw)], dim=-1)  # facing -Y at yaw 0
     velocity = speed * env[:, None] * forward
     root_xy = rig.root[:2] + torch.cumsum(velocity, 0) / fps - velocity[0] / fps
-    gait = _Gait(cadence, 1.0 - (1.0 - duty) * env, swing_height, {"left": 0.0, "right": 0.5})
+    gait = _Gait(cadence, 1.0 - (1.0 - duty) * env, env, swing_height * k, {"left": 0.0, "right": 0.5})
     ankles, feet, toes = _foot_tracks(rig, t, root_xy, yaw, gait, fps)
     phase = 2 * math.pi * cadence * t
     pelvis = rot_z(yaw + 0.08 * env * torch.sin(phase)) @ rot_y(0.04 * env * torch.sin(phase))
-    root_z = rig.root[2] - 0.01 - bob * env * (1 + torch.cos(2 * phase)) / 2
+    root_z = rig.root[2] - k * (0.01 + bob * env * (1 + torch.cos(2 * phase)) / 2)
     torso = rot_x(-lean * env) @ rot_z(-0.12 * env * torch.sin(phase))
     head = rot_z(0.06 * env * torch.sin(phase))
     arms = {
@@ -161,15 +171,22 @@ def _locomotion(body: Body, name: str, speed: float, duration: float, fps: float
     return _assemble(rig, t, fps, root_xy, root_z, pelvis, ankles, feet, torso, head, arms, name, toes)
 
 
+def body_scale(body: Body) -> float:
+    """Leg length relative to the default body: lengths of the clips scale with it, timing does not."""
+    return body.leg_length / REFERENCE_LEG_LENGTH
+
+
 def walk(body: Body, speed: float = 1.2, duration: float = 6.0, fps: float = DEFAULT_FPS) -> Motion:
     """Walk forward (-Y) at ``speed`` m/s."""
-    cadence = 0.75 + 0.2 * speed  # gait cycles per second (two steps each)
+    # Gait cycles per second (two steps each), set by the speed in leg lengths per second,
+    # so a small body at a given speed steps like a large one at a proportional speed.
+    cadence = 0.75 + 0.2 * speed / body_scale(body)
     return _locomotion(body, "walk", speed, duration, fps, cadence=cadence, duty=0.62, swing_height=0.12)
 
 
 def run(body: Body, speed: float = 2.5, duration: float = 6.0, fps: float = DEFAULT_FPS) -> Motion:
     """Jog forward at ``speed`` m/s (short flight phases)."""
-    cadence = 1.2 + 0.1 * speed
+    cadence = 1.2 + 0.1 * speed / body_scale(body)
     return _locomotion(body, "run", speed, duration, fps, cadence=cadence, duty=0.4, swing_height=0.2,
                        lean=0.15, arm_swing=0.6, elbow=1.2, bob=0.04)
 
@@ -196,8 +213,9 @@ def idle(body: Body, speed: float = 1.0, duration: float = 8.0, fps: float = DEF
     rig, ankles, feet = _standing(body, t)
     env = _envelope(t, duration, ramp=min(1.0, duration / 3))
     w = 2 * math.pi * 0.25 * speed * t
-    root_xy = rig.root[:2] + torch.stack([0.03 * env * torch.sin(w), 0.01 * env * torch.sin(2 * w)], -1)
-    root_z = rig.root[2] - 0.015 * env - 0.01 * env * torch.sin(w) ** 2
+    k = body_scale(body)
+    root_xy = rig.root[:2] + k * torch.stack([0.03 * env * torch.sin(w), 0.01 * env * torch.sin(2 * w)], -1)
+    root_z = rig.root[2] - k * (0.015 * env + 0.01 * env * torch.sin(w) ** 2)
     pelvis = rot_y(0.05 * env * torch.sin(w)) @ rot_z(0.04 * env * torch.sin(0.5 * w))
     torso = rot_y(-0.07 * env * torch.sin(w)) @ rot_x(0.02 * env * torch.sin(4 * w))
     head = rot_z(0.1 * env * torch.sin(0.7 * w)) @ rot_y(0.02 * env * torch.sin(w))
@@ -213,7 +231,7 @@ def arm_swing(body: Body, speed: float = 1.0, duration: float = 6.0, fps: float 
     env = _envelope(t, duration, ramp=min(1.0, duration / 3))
     w = 2 * math.pi * 0.5 * speed * t
     root_xy = rig.root[:2].expand(len(t), 2)
-    root_z = rig.root[2] - 0.02 * env - 0.01 * env * torch.sin(2 * w) ** 2
+    root_z = rig.root[2] - body_scale(body) * (0.02 * env + 0.01 * env * torch.sin(2 * w) ** 2)
     pelvis = rot_z(0.06 * env * torch.sin(w))
     torso = rot_z(0.15 * env * torch.sin(w))
     head = rot_z(-0.15 * env * torch.sin(w))
@@ -237,12 +255,12 @@ def sit(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEFA
     rig, ankles, feet = _standing(body, t)
     k = [0.0, 0.4 / speed, 1.3 / speed, 2.0 / speed]
     leg = rig.leg_length
-    back = _keyframes(t, k, [0.0, 0.02, 0.33 * leg, 0.36 * leg])
-    down = _keyframes(t, k, [0.0, 0.03, 0.40 * leg, 0.42 * leg])
+    back = _keyframes(t, k, [0.0, 0.025 * leg, 0.33 * leg, 0.36 * leg])
+    down = _keyframes(t, k, [0.0, 0.04 * leg, 0.40 * leg, 0.42 * leg])
     lean = _keyframes(t, k + [2.6 / speed], [0.0, 0.2, 0.55, 0.2, 0.1])
     arms_forward = _keyframes(t, k, [0.0, 0.3, 0.6, 0.5])
     root_xy = rig.root[:2] + torch.stack([torch.zeros_like(t), back], -1)
-    root_z = rig.root[2] - 0.01 - down
+    root_z = rig.root[2] - 0.0125 * leg - down
     pelvis = rot_x(-0.6 * lean)
     torso = rot_x(-0.5 * lean)
     head = rot_x(0.4 * lean)
@@ -251,14 +269,19 @@ def sit(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEFA
 
 
 def jump(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEFAULT_FPS, height: float = 0.25) -> Motion:
-    """Vertical jumps in place (``height`` metres); ``speed`` scales the tempo of crouch and landing."""
+    """Vertical jumps in place; ``speed`` scales the tempo of crouch and landing.
+
+    ``height`` is in metres for the default body; other bodies jump in proportion to their
+    leg length with the same timing (the vertical path is scaled as a whole).
+    """
     t = torch.arange(int(round(duration * fps)) + 1, dtype=torch.float32) / fps
     rig, ankles, feet = _standing(body, t)
+    k = body_scale(body)
     takeoff_speed = math.sqrt(2 * GRAVITY * height)
     flight = 2 * takeoff_speed / GRAVITY
     crouch, push, land = 0.45 / speed, 0.18 / speed, 0.6 / speed
     period = crouch + push + flight + land + 0.3 / speed
-    base = rig.root[2] - 0.01
+    base = rig.root[2] - 0.01 * k
     dz = torch.zeros_like(t)
     arm = torch.zeros_like(t)
     num_jumps = max(1, int((duration - 0.5) // period))
@@ -285,14 +308,15 @@ def jump(body: Body, speed: float = 1.0, duration: float = 5.0, fps: float = DEF
         inside = (s >= 0) & (s < period)
         arm_keys = [0.0, crouch, crouch + push + 0.12, crouch + push + flight, period - 0.1 / speed]
         arm = torch.where(inside, _keyframes(s, arm_keys, [0.0, -0.5, 1.2, 0.6, 0.0]), arm)
+    dz = dz * k
     root_z = base + dz
     for side in SIDES:
         # The feet leave the ground only once the hips rise above their standing height.
-        lift = (dz - 0.005).clamp(min=0)
+        lift = (dz - 0.005 * k).clamp(min=0)
         ankles[side] = ankles[side] + lift[:, None] * torch.tensor([0.0, 0.0, 1.0])
-        feet[side] = feet[side] @ rot_x(2.0 * lift)
+        feet[side] = feet[side] @ rot_x(2.0 * lift / k)
     root_xy = rig.root[:2].expand(len(t), 2)
-    crouch_amount = (-dz).clamp(min=0) / 0.14
+    crouch_amount = (-dz).clamp(min=0) / (0.14 * k)
     pelvis = rot_x(-0.35 * crouch_amount)
     torso = rot_x(-0.25 * crouch_amount)
     head = rot_x(0.3 * crouch_amount)
@@ -328,7 +352,9 @@ def builtin_motion(name: str, body: Body, speed: float | None = None, duration: 
     if name not in BUILTINS:
         raise ParameterError(f"unknown built-in motion {name!r}; available: {', '.join(BUILTINS)}")
     spec = BUILTINS[name]
-    speed = spec.default_speed if speed is None else speed
+    if speed is None:
+        # Default walking and running speeds are for the default body; others move in proportion.
+        speed = spec.default_speed * (body_scale(body) if spec.speed_unit == "m/s" else 1.0)
     duration = spec.default_duration if duration is None else duration
     if not (speed > 0 or (name == "walk" and speed == 0)):
         raise ParameterError(f"--speed must be positive for {name}, got {speed}")

@@ -110,3 +110,14 @@ def foot_slip_per_step(
         for start, stop in stance_intervals(stance, min_frames):
             steps.append({"side": side, "start": start, "stop": stop, "slip": float(length[start:stop - 1].sum())})
     return steps
+
+
+def still_frames(points: torch.Tensor, fps: float, max_speed: float = 0.05, min_frames: int = 3) -> torch.Tensor:
+    """(T,n,3) sole vertices -> (T,) frames inside runs of >= ``min_frames`` where the sole centre
+    moves slower than ``max_speed`` m/s (a foot standing still, which must be on the ground)."""
+    centre = points.mean(1)
+    speed = torch.cat([torch.zeros(1), (centre[1:] - centre[:-1]).norm(dim=-1) * fps])
+    still = torch.zeros(len(points), dtype=torch.bool)
+    for start, stop in stance_intervals(speed < max_speed, min_frames):
+        still[start:stop] = True
+    return still

@@ -8,6 +8,9 @@ import numpy as np
 
 from hyperbones.body import BodyShape, body_for
 from hyperbones.body.skeleton import LIMB_SEGMENTS
+from hyperbones.geometry.rotations import rotation_angle_deg
+from hyperbones.motion.builtin import BUILTINS, builtin_motion
+from hyperbones.motion.ground import sole_points, still_frames
 from hyperbones.motion.bvh import read_bvh
 from hyperbones.motion.fidelity import retarget_report
 from hyperbones.motion.retarget import retarget_bvh
@@ -46,3 +49,26 @@ def retarget_tables(paths: list[str], body_text: str | None = None, source_fps: 
             f"(body {body.shape.label()}, 30 fps, blend-in 0):\n\n" + "\n".join(fidelity) +
             "\n\nFoot slip per step (sole vertices < 1.5 cm above the ground and the sole centre "
             "slower than 1 m/s count as stance; slip = path length of the touching part):\n\n" + "\n".join(slip))
+
+
+def builtin_table(body_text: str | None = None, hold: float = 1.0) -> str:
+    """Smoothness and ground contact of every built-in clip (default parameters plus a hold)."""
+    body = body_for(BodyShape.parse(body_text))
+    rows = ["| clip | frames | max joint rotation step ° | lowest sole cm | highest still foot cm | still-foot frames |",
+            "|---|---:|---:|---:|---:|---:|"]
+    for name in BUILTINS:
+        motion = builtin_motion(name, body, hold=hold)
+        posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
+        step = float(rotation_angle_deg(motion.joint_rotations[1:], motion.joint_rotations[:-1]).max())
+        lowest, still_max, still_count = float("inf"), 0.0, 0
+        for points in sole_points(body, posed.skinning_transforms).values():
+            heights = points[..., 2].amin(-1)
+            still = still_frames(points, motion.fps)
+            lowest = min(lowest, float(heights.min()))
+            still_count += int(still.sum())
+            if still.any():
+                still_max = max(still_max, float(heights[still].max()))
+        rows.append(f"| {name} | {motion.num_frames} | {step:.1f} | {lowest * 100:.2f} | {still_max * 100:.2f} | "
+                    f"{still_count} |")
+    return (f"Built-in clips on body {body.shape.label()} with a {hold:g} s hold. A still foot: its sole centre moves "
+            "slower than 5 cm/s for at least 3 frames; it must touch the ground (< 1 cm).\n\n" + "\n".join(rows))
