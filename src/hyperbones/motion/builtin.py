@@ -117,8 +117,9 @@ def _foot_tracks(rig: LegRig, t, path_xy, path_yaw, gait: _Gait, fps: float):
             w = _smoothstep(u)
             ground_xy[a:b] = start_xy + w[:, None] * (end_xy - start_xy)
             yaw[a:b] = start_yaw + w * (end_yaw - start_yaw)
-            span = float((end_xy - start_xy).norm())
-            lift[a:b] = min(gait.swing_height, 0.3 * gait.swing_height + 0.25 * span) * torch.sin(math.pi * u)
+            # Early and late swings are short and quick: they lift as little as the gait is intense.
+            amplitude = gait.swing_height * float(gait.intensity[(a + b) // 2])
+            lift[a:b] = amplitude * torch.sin(math.pi * u)
             # From the toe-off roll to the heel-strike roll, toe down early and toe up late.
             roll[a:b] = TOE_OFF_ROLL * (1 - w) + HEEL_STRIKE_ROLL * w + 0.3 * torch.sin(2 * math.pi * u) * torch.sin(math.pi * u)
         yaw_rot = rot_z(yaw)

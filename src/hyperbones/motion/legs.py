@@ -19,6 +19,8 @@ SIDES = {"left": "Left", "right": "Right"}
 # Fraction of the full leg length a solved leg may use, so knees never lock straight
 # (a straight knee makes the bend direction ill-defined and the pose jumpy).
 MAX_REACH = 0.985
+# Smallest hip-ankle distance as a fraction of the leg length: about 115-125 degrees of knee flexion.
+MIN_FOLD = 0.55
 
 
 def frame_from(direction: torch.Tensor, pole: torch.Tensor) -> torch.Tensor:
@@ -134,7 +136,10 @@ class LegRig:
         """
         l1, l2 = float(self.thigh[side].norm()), float(self.shin[side].norm())
         reach = ankle - hip
-        dist = reach.norm(dim=-1, keepdim=True).clamp(abs(l1 - l2) + 1e-4, MAX_REACH * (l1 + l2))
+        # Near the full fold (hip-ankle distance -> |l1 - l2|) the thigh direction swings
+        # wildly; legs with a short thigh get there in a high-knee swing. Cap the fold.
+        dist = reach.norm(dim=-1, keepdim=True).clamp(max(abs(l1 - l2) + 1e-4, MIN_FOLD * (l1 + l2)),
+                                                      MAX_REACH * (l1 + l2))
         along = reach / reach.norm(dim=-1, keepdim=True)
         # The knee hinge axis is the foot's lateral axis: unlike "forward", it is never
         # parallel to the thigh (a high-knee run swing makes the thigh point forward).
