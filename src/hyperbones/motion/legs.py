@@ -13,9 +13,16 @@ from hyperbones.body.skeleton import JOINT_INDEX as J
 from hyperbones.body.skeleton import NUM_JOINTS
 import math
 
+import roma
+
 from hyperbones.geometry.rotations import minimal_rotation, rot_x
 
 SIDES = {"left": "Left", "right": "Right"}
+# Bones that move rigidly with the forearm (the built-in clips do not pose the hands).
+HAND_CHAIN = {
+    "left": ("LeftForeArm", "LeftHand", "LThumb", "LeftFingerBase", "LeftHandFinger1"),
+    "right": ("RightForeArm", "RightHand", "RThumb", "RightFingerBase", "RightHandFinger1"),
+}
 # Fraction of the full leg length a solved leg may use, so knees never lock straight
 # (a straight knee makes the bend direction ill-defined and the pose jumpy).
 MAX_REACH = 0.985
@@ -103,8 +110,6 @@ class LegRig:
         num_frames = root.shape[0]
         rot = torch.eye(3).repeat(num_frames, NUM_JOINTS, 1, 1)
         rot[:, J["Hips"]] = rot[:, J["LHipJoint"]] = rot[:, J["RHipJoint"]] = pelvis
-        import roma
-
         third = roma.rotvec_to_rotmat(roma.rotmat_to_rotvec(torso) / 3)
         chest = pelvis
         for bone in ("LowerBack", "Spine", "Spine1"):
@@ -117,9 +122,7 @@ class LegRig:
             upper = chest @ shoulder
             rot[:, J[f"{prefix}Arm"]] = upper
             lower = upper @ elbow
-            for bone in ("ForeArm", "Hand", "LThumb" if side == "left" else "RThumb",
-                         "FingerBase", "HandFinger1"):
-                name = bone if bone.startswith(("L", "R")) and bone[1].isupper() else f"{prefix}{bone}"
+            for name in HAND_CHAIN[side]:
                 rot[:, J[name]] = lower
             hip = root + pelvis @ self.hip_offset[side]
             thigh_rot, shin_rot = self._two_bone(side, hip, ankles[side], feet[side])

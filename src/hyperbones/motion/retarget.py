@@ -33,30 +33,22 @@ BVH_UNIT_METRES = 0.056444
 # BVH (x, y, z) -> project (x, -z, y): a proper rotation (det +1).
 BVH_TO_WORLD = torch.tensor([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]], dtype=torch.float64)
 
-# Bone -> (from, to) joints of the BVH rest segment it is aligned with. Anny's Spine1 has
-# no BVH counterpart (the BVH's Spine1 head coincides with its Neck), so it follows the
-# BVH's Spine segment. Feet are not aligned: both rest poses stand flat-footed, while the
-# ankle -> toe-base line dips 19 degrees on Anny and 10 on the BVH, so aligning that line
-# would lift Anny's toes off the ground.
-ALIGNED_BONES: dict[str, tuple[str, str]] = {
-    **{
-        f"{side}{bone}": (f"{side}{bone}", f"{side}{target}")
-        for side in ("Left", "Right")
-        for bone, target in (("UpLeg", "Leg"), ("Leg", "Foot"),
-                             ("Arm", "ForeArm"), ("ForeArm", "Hand"), ("Hand", "HandFinger1"))
-    },
-    "LowerBack": ("LowerBack", "Spine"),
-    "Spine": ("Spine", "Spine1"),
-    "Spine1": ("Spine", "Spine1"),
-    "Neck": ("Neck", "Neck1"),
-    "Neck1": ("Neck1", "Head"),
-}
-# The Anny bone's own direction: its head to the head of this child.
-ANNY_BONE_CHILD: dict[str, str] = {
-    **{f"{s}{b}": f"{s}{t}" for s in ("Left", "Right")
-       for b, t in (("UpLeg", "Leg"), ("Leg", "Foot"),
-                    ("Arm", "ForeArm"), ("ForeArm", "Hand"), ("Hand", "HandFinger1"))},
-    "LowerBack": "Spine", "Spine": "Spine1", "Spine1": "Neck", "Neck": "Neck1", "Neck1": "Head",
+# Limb bones and the joint their direction points to, on both skeletons.
+_LIMB_TARGETS = {f"{side}{bone}": f"{side}{target}" for side in ("Left", "Right")
+                 for bone, target in (("UpLeg", "Leg"), ("Leg", "Foot"), ("Arm", "ForeArm"),
+                                      ("ForeArm", "Hand"), ("Hand", "HandFinger1"))}
+# Bone -> (the Anny joint its direction points to, the BVH rest segment it is aligned with).
+# Anny's Spine1 has no BVH counterpart (the BVH's Spine1 head coincides with its Neck), so
+# it follows the BVH's Spine segment. Feet are not aligned: both rest poses stand
+# flat-footed, while the ankle -> toe-base line dips 19 degrees on Anny and 10 on the BVH,
+# so aligning that line would lift Anny's toes off the ground.
+ALIGNED_BONES: dict[str, tuple[str, tuple[str, str]]] = {
+    **{bone: (target, (bone, target)) for bone, target in _LIMB_TARGETS.items()},
+    "LowerBack": ("Spine", ("LowerBack", "Spine")),
+    "Spine": ("Spine1", ("Spine", "Spine1")),
+    "Spine1": ("Neck", ("Spine", "Spine1")),
+    "Neck": ("Neck1", ("Neck", "Neck1")),
+    "Neck1": ("Head", ("Neck1", "Head")),
 }
 # Above this root speed a clip is probably captured at a lower rate than its header says.
 IMPLAUSIBLE_ROOT_SPEED = 9.0
@@ -85,9 +77,9 @@ def rest_alignment(body: Body, clip: BvhClip) -> torch.Tensor:
     for joint in range(1, len(JOINT_NAMES)):
         name = JOINT_NAMES[joint]
         if name in ALIGNED_BONES:
-            start, end = (JOINT_INDEX[j] for j in ALIGNED_BONES[name])
-            bvh_dir = bvh_rest[end] - bvh_rest[start]
-            anny_dir = anny_rest[JOINT_INDEX[ANNY_BONE_CHILD[name]]] - anny_rest[joint]
+            anny_target, (start, end) = ALIGNED_BONES[name]
+            bvh_dir = bvh_rest[JOINT_INDEX[end]] - bvh_rest[JOINT_INDEX[start]]
+            anny_dir = anny_rest[JOINT_INDEX[anny_target]] - anny_rest[joint]
             if bvh_dir.norm() < 1e-9:
                 align.append(align[JOINT_PARENTS[joint]])
             else:
