@@ -76,7 +76,7 @@ def cmd_demo(args) -> int:
     from hyperbones.motion import load_motion, save_motion_npz
     from hyperbones.viz.scene import render_motion
 
-    out = Path(args.out)
+    out = Path(args.out).resolve()
     start = time.perf_counter()
     print("hyperbones demo: building the default Anny body (the first run on a machine builds Anny's cache, ~1 min)")
     body = Body()
