@@ -23,8 +23,8 @@ def retarget_tables(paths: list[str], body_text: str | None = None, source_fps: 
     """
     body = body_for(BodyShape.parse(body_text))
     source_fps = source_fps or {}
-    fidelity = ["| clip | frames | limbs mean ° | limbs p95 ° | worst limb p95 ° | spine mean ° | neck mean ° |",
-                "|---|---:|---:|---:|---:|---:|---:|"]
+    fidelity = ["| clip | frames | limbs mean ° | limbs p95 ° | worst limb mean ° | worst limb p95 ° | spine mean ° | "
+                "neck mean ° |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     slip = ["| clip | steps | slip median cm | slip max cm | slip max cm without foot lock |",
             "|---|---:|---:|---:|---:|"]
     for path in paths:
@@ -35,9 +35,10 @@ def retarget_tables(paths: list[str], body_text: str | None = None, source_fps: 
         report = retarget_report(motion, body, clip, source_fps=fps)
         raw = retarget_report(retarget_bvh(path, body, source_fps=fps, lock_feet_in_stance=False), body, clip, fps)
         seg = report["segments"]
-        worst = max(seg[name].p95 for name in LIMB_SEGMENTS)
+        worst_mean = max(seg[name].mean for name in LIMB_SEGMENTS)
+        worst_p95 = max(seg[name].p95 for name in LIMB_SEGMENTS)
         fidelity.append(f"| {stem} | {motion.num_frames} | {report['limb_mean']:.2f} | {report['limb_p95']:.2f} | "
-                        f"{worst:.2f} | {seg['spine'].mean:.2f} | {seg['neck'].mean:.2f} |")
+                        f"{worst_mean:.2f} | {worst_p95:.2f} | {seg['spine'].mean:.2f} | {seg['neck'].mean:.2f} |")
         slips = np.array([s["slip"] for s in report["steps"]]) * 100
         raw_slips = np.array([s["slip"] for s in raw["steps"]]) * 100
         if len(slips):
