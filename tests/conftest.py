@@ -2,12 +2,10 @@
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 import pytest
 
-os.environ.setdefault("WARP_LOG_LEVEL", "error")
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"
 CMU_DIR = SHARED / "data" / "mocap" / "cmu"

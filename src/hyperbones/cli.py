@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 import warnings
@@ -160,7 +159,6 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 2
-    os.environ.setdefault("WARP_LOG_LEVEL", "error")
     warnings.showwarning = _one_line_warnings
     try:
         return args.func(args)

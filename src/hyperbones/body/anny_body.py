@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import functools
 import os
+import sys
+import tempfile
 from dataclasses import dataclass
 
 import torch
@@ -17,6 +19,34 @@ from hyperbones.body.skeleton import JOINT_NAMES, JOINT_INDEX, NUM_JOINTS, forwa
 from hyperbones.geometry.lbs import linear_blend_skinning
 
 
+# Printed by Warp's native library on every machine without a GPU: expected, not news.
+_EXPECTED_WARP_NOISE = ("Could not find or load the NVIDIA CUDA driver",)
+
+
+def _init_warp_quietly() -> None:
+    """Initialise Warp (Anny's kernels use it) without its banner or the no-GPU notice.
+
+    The notice comes from native code, so the process's stderr is captured at the file
+    descriptor level during ``wp.init()``; any other message is passed on.
+    """
+    import warp
+
+    warp.config.log_level = warp.LOG_ERROR
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile(mode="w+b") as captured:
+        os.dup2(captured.fileno(), 2)
+        try:
+            warp.init()
+        finally:
+            os.dup2(saved, 2)
+            os.close(saved)
+        captured.seek(0)
+        for line in captured.read().decode(errors="replace").splitlines():
+            if line.strip() and not any(noise in line for noise in _EXPECTED_WARP_NOISE):
+                print(line, file=sys.stderr)
+
+
 @functools.lru_cache(maxsize=1)
 def anny_model():
     """The process-wide Anny model (``rig="cmu_mb"``, float32).
@@ -24,11 +54,9 @@ def anny_model():
     The first construction on a machine builds Anny's cache (about a minute, kept in
     ``ANNY_CACHE_DIR`` when set); later ones take a few seconds. Construct it once.
     """
-    os.environ.setdefault("WARP_LOG_LEVEL", "error")
+    _init_warp_quietly()
     import anny
-    import warp
 
-    warp.config.quiet = True
     model = anny.Anny(rig="cmu_mb").to(torch.float32)
     if tuple(model.bone_labels) != JOINT_NAMES:
         raise RuntimeError(f"unexpected Anny cmu_mb joint names: {model.bone_labels}")

@@ -19,7 +19,7 @@ import torch
 
 from hyperbones.body.anny_body import Body
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.rotations import rot_x, rot_y, rot_z, slerp_rotmat
+from hyperbones.geometry.rotations import rot_x, rot_y, rot_z
 from hyperbones.motion.legs import SIDES, LegRig
 from hyperbones.motion.motion import DEFAULT_FPS, Motion
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import torch
 
 from hyperbones.body.anny_body import Body
-from hyperbones.body.skeleton import JOINT_INDEX
 
 SIDES = ("left", "right")
 
