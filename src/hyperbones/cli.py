@@ -24,7 +24,7 @@ def _add_motion_args(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--blend-in", type=int, default=DEFAULT_BLEND_IN, metavar="N",
                         help=f"frames of transition from the A-pose at the start, 0 disables (default: {DEFAULT_BLEND_IN})")
     parser.add_argument("--speed", type=float, default=None,
-                        help="built-in motions: walk/run in m/s, turn in turns/s, others a tempo factor")
+                        help="built-in motions: walk/run in m/s (default 1.2/2.5 for the default body, in proportion to leg length for others), turn in turns/s, others a tempo factor")
     parser.add_argument("--duration", type=float, default=None, help="built-in motions: seconds of motion")
     parser.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended at the end")
     parser.add_argument("--fps", type=float, default=30.0, help="output frame rate (default: 30)")
