@@ -1,0 +1,5 @@
+"""Garments: the Garment type, OBJ / MakeHuman import, procedural templates, canonical drape."""
+
+from hyperbones.garment.garment import Garment
+
+__all__ = ["Garment"]

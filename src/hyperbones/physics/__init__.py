@@ -1,0 +1,1 @@
+"""Physics: cloth materials, energies (HOOD's), proximity to the body, metrics."""

@@ -1,0 +1,52 @@
+"""Cloth material: HOOD's inference defaults, changeable from the command line (``--material k=v``)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+
+from hyperbones.errors import ParameterError
+
+
+@dataclass(frozen=True)
+class Material:
+    """Cloth parameters in SI units (REFERENCE.md, "Material").
+
+    lame_mu, lame_lambda: StVK Lamé coefficients, Pa.
+    thickness: m. density: areal density, kg/m². bending: bending stiffness k_b.
+    """
+
+    lame_mu: float = 23600.0
+    lame_lambda: float = 44400.0
+    thickness: float = 4.7e-4
+    density: float = 0.20022
+    bending: float = 3.9626e-5
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+                raise ParameterError(f"material {f.name}={value!r} must be a positive number")
+
+    def as_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    @classmethod
+    def parse(cls, text: str | None) -> "Material":
+        """``mu=30000,bending=1e-4``; keys: mu, lambda, thickness, density, bending (or full field names)."""
+        aliases = {"mu": "lame_mu", "lambda": "lame_lambda", "lame_mu": "lame_mu", "lame_lambda": "lame_lambda",
+                   "thickness": "thickness", "density": "density", "bending": "bending"}
+        if text is None or text.strip() in ("", "default"):
+            return cls()
+        values: dict[str, float] = {}
+        for item in filter(None, (part.strip() for part in text.split(","))):
+            key, sep, raw = (s.strip() for s in item.partition("="))
+            if not sep:
+                raise ParameterError(f"--material: expected key=value, got {item!r}")
+            if key not in aliases:
+                raise ParameterError(f"--material: unknown key {key!r}; known keys: mu, lambda, thickness, density, bending")
+            try:
+                values[aliases[key]] = float(raw)
+            except ValueError:
+                raise ParameterError(f"--material: {key}={raw!r} is not a number") from None
+        return cls(**values)
