@@ -93,6 +93,7 @@ class Body:
         rest_joint_tails: (31,3) canonical bone tails (leaf bones' ends).
         rest_joint_orientations: (31,3,3) canonical bone frames (Y along the bone).
         foot_vertex_indices: {"left","right"}: (n,) indices of sole vertices.
+        ground_lift: (3,) translation from Anny's rest space to the canonical space.
     """
 
     joint_names = JOINT_NAMES
@@ -105,6 +106,8 @@ class Body:
             out = model(None, phenotype_kwargs=self.shape.as_dict(), return_bone_ends=True)
         rest_vertices = out["rest_vertices"][0]
         lift = torch.tensor([0.0, 0.0, -float(rest_vertices[:, 2].min())])
+        # Anny rest space -> canonical space (other Anny topologies of this shape use it too).
+        self.ground_lift = lift.to(self.device)
         self.rest_vertices = (rest_vertices + lift).to(self.device)
         self.rest_joint_positions = (out["rest_bone_heads"][0] + lift).to(self.device)
         self.rest_joint_tails = (out["rest_bone_tails"][0] + lift).to(self.device)
