@@ -1,0 +1,187 @@
+"""Write animated triangle meshes to a USD stage (time-sampled points)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from hyperbones.errors import ParameterError
+from hyperbones.export._checks import (check_positive, check_up, faces_array, frames_array, to_up,
+                                       uv_arrays)
+from hyperbones.io_utils import atomic_path
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
+@dataclass
+class UsdMesh:
+    """One mesh for :func:`write_usd`.
+
+    Attributes:
+        name: prim name under ``/Root`` (a USD identifier: letters, digits, ``_``; not
+            starting with a digit).
+        vertices: (T,V,3) animated or (V,3) static positions, metres, Z up.
+        faces: (F,3) 0-based triangle vertex indices.
+        uvs: optional (U,2) texture coordinates.
+        face_uvs: optional (F,3) indices into ``uvs`` per face corner (seams); written with
+            ``uvs`` as an indexed faceVarying ``primvars:st``. When omitted with ``uvs`` of
+            shape (V,2), the faces index both.
+        display_color: optional RGB in [0, 1], (3,) for the whole mesh or (V,3) per vertex,
+            written as ``primvars:displayColor``.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None = None
+    face_uvs: np.ndarray | None = None
+    display_color: tuple[float, float, float] | np.ndarray | None = None
+
+
+@dataclass
+class _Checked:
+    name: str
+    points: np.ndarray  # (T,V,3) or (V,3) float32, already in the stage's axes and units
+    faces: np.ndarray
+    uv: tuple[np.ndarray, np.ndarray] | None
+    color: np.ndarray | None
+
+
+def write_usd(
+    path: str | Path,
+    meshes: list[UsdMesh],
+    fps: float = 30.0,
+    up_axis: str = "Z",
+    meters_per_unit: float = 1.0,
+) -> Path:
+    """Write ``meshes`` to a USD stage at ``path`` (``.usd``/``.usdc`` binary, ``.usda`` text).
+
+    The stage has an Xform ``/Root`` (the default prim) with one ``UsdGeom.Mesh`` per mesh.
+    Animated meshes get ``points`` and ``extent`` time samples at time code = frame index
+    0..T-1; static meshes a plain value. Stage metadata: ``startTimeCode`` 0,
+    ``endTimeCode`` T-1, ``timeCodesPerSecond`` = ``framesPerSecond`` = ``fps``,
+    ``upAxis``, ``metersPerUnit``. Faces are triangles (``faceVertexCounts`` all 3),
+    ``subdivisionScheme`` "none".
+
+    ``up_axis="Y"`` converts the Z-up input, (x,y,z) -> (x,z,-y); ``meters_per_unit``
+    other than 1 rescales the metre input into the stage unit (points / meters_per_unit).
+    All animated meshes must have the same number of frames. Written atomically.
+    """
+    from pxr import Sdf, Usd, UsdGeom
+
+    path = Path(path)
+    if path.suffix.lower() not in USD_SUFFIXES:
+        raise ParameterError(f"{path}: the USD output must end in .usd, .usda or .usdc")
+    fps = check_positive("fps", fps)
+    up_axis = check_up(up_axis, "up_axis")
+    meters_per_unit = check_positive("meters_per_unit", meters_per_unit)
+    checked = _check_meshes(meshes, up_axis, meters_per_unit, Sdf)
+    n_frames = max((m.points.shape[0] for m in checked if m.points.ndim == 3), default=1)
+
+    with atomic_path(path) as tmp:
+        stage = Usd.Stage.CreateNew(str(tmp))
+        try:
+            root = UsdGeom.Xform.Define(stage, "/Root")
+            stage.SetDefaultPrim(root.GetPrim())
+            UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis == "Z" else UsdGeom.Tokens.y)
+            UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+            stage.SetTimeCodesPerSecond(fps)
+            stage.SetFramesPerSecond(fps)
+            stage.SetStartTimeCode(0)
+            stage.SetEndTimeCode(n_frames - 1)
+            for mesh in checked:
+                _define_mesh(stage, mesh)
+            stage.GetRootLayer().Save()
+        finally:
+            del stage  # release the layer before the file is renamed
+    return path
+
+
+def _check_meshes(meshes, up_axis: str, meters_per_unit: float, Sdf) -> list[_Checked]:
+    if isinstance(meshes, UsdMesh):
+        meshes = [meshes]
+    meshes = list(meshes)
+    if not meshes:
+        raise ParameterError("write_usd needs at least one mesh")
+    names: set[str] = set()
+    frame_counts: set[int] = set()
+    checked = []
+    for mesh in meshes:
+        if not isinstance(mesh, UsdMesh):
+            raise ParameterError(f"meshes must be UsdMesh instances, got {type(mesh).__name__}")
+        if not isinstance(mesh.name, str) or not Sdf.Path.IsValidIdentifier(mesh.name):
+            raise ParameterError(
+                f"mesh name {mesh.name!r} is not a USD identifier (letters, digits, '_', "
+                "not starting with a digit)")
+        if mesh.name in names:
+            raise ParameterError(f"two meshes are named {mesh.name!r}")
+        names.add(mesh.name)
+        label = f"mesh {mesh.name!r}"
+        points = frames_array(f"{label} vertices", mesh.vertices, allow_static=True)
+        n_vertices = points.shape[-2]
+        if points.ndim == 3:
+            frame_counts.add(points.shape[0])
+        faces = faces_array(f"{label} faces", mesh.faces, n_vertices)
+        uv = uv_arrays(mesh.uvs, mesh.face_uvs, faces, n_vertices)
+        color = None
+        if mesh.display_color is not None:
+            color = np.asarray(mesh.display_color, dtype=np.float32)
+            if color.shape == (3,):
+                color = color[None]
+            elif color.shape != (n_vertices, 3):
+                raise ParameterError(
+                    f"{label} display_color must have shape (3,) or ({n_vertices},3), got {color.shape}")
+            if not np.isfinite(color).all():
+                raise ParameterError(f"{label} display_color contains NaN or infinite values")
+        points = to_up(points, up_axis)
+        if meters_per_unit != 1.0:
+            points = points / meters_per_unit
+        points = np.ascontiguousarray(points, dtype=np.float32)
+        checked.append(_Checked(mesh.name, points, faces, uv, color))
+    if len(frame_counts) > 1:
+        raise ParameterError(f"animated meshes have different frame counts: {sorted(frame_counts)}")
+    return checked
+
+
+def _define_mesh(stage, mesh: _Checked) -> None:
+    """Author one ``UsdGeom.Mesh`` under /Root."""
+    from pxr import Sdf, Usd, UsdGeom, Vt
+
+    prim = UsdGeom.Mesh.Define(stage, f"/Root/{mesh.name}")
+    n_faces = mesh.faces.shape[0]
+    prim.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(n_faces, 3, dtype=np.int32)))
+    prim.CreateFaceVertexIndicesAttr(
+        Vt.IntArray.FromNumpy(np.ascontiguousarray(mesh.faces.ravel(), dtype=np.int32)))
+    prim.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    prim.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+
+    points_attr = prim.CreatePointsAttr()
+    extent_attr = prim.CreateExtentAttr()
+    if mesh.points.ndim == 2:
+        points_attr.Set(Vt.Vec3fArray.FromNumpy(mesh.points))
+        extent_attr.Set(Vt.Vec3fArray.FromNumpy(_extent(mesh.points)))
+    else:
+        lows = mesh.points.min(axis=1)
+        highs = mesh.points.max(axis=1)
+        for t in range(mesh.points.shape[0]):
+            time = Usd.TimeCode(float(t))
+            points_attr.Set(Vt.Vec3fArray.FromNumpy(mesh.points[t]), time)
+            extent_attr.Set(Vt.Vec3fArray.FromNumpy(np.stack([lows[t], highs[t]])), time)
+
+    primvars = UsdGeom.PrimvarsAPI(prim)
+    if mesh.uv is not None:
+        coords, face_uvs = mesh.uv
+        st = primvars.CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                    UsdGeom.Tokens.faceVarying)
+        st.Set(Vt.Vec2fArray.FromNumpy(np.ascontiguousarray(coords, dtype=np.float32)))
+        st.SetIndices(Vt.IntArray.FromNumpy(np.ascontiguousarray(face_uvs.ravel(), dtype=np.int32)))
+    if mesh.color is not None:
+        interpolation = UsdGeom.Tokens.constant if len(mesh.color) == 1 else UsdGeom.Tokens.vertex
+        color = primvars.CreatePrimvar("displayColor", Sdf.ValueTypeNames.Color3fArray, interpolation)
+        color.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(mesh.color)))
+
+
+def _extent(points: np.ndarray) -> np.ndarray:
+    return np.stack([points.min(axis=0), points.max(axis=0)]).astype(np.float32)

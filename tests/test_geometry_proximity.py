@@ -1,0 +1,145 @@
+import pytest
+import torch
+
+from hyperbones.geometry.proximity import (
+    BodyProximity,
+    face_planes,
+    is_closed_surface,
+    signed_distance,
+    surface_points,
+)
+from hyperbones.physics.energies import collision_energy
+
+F64 = torch.float64
+
+
+def icosphere(subdivisions: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """A unit sphere: an icosahedron split ``subdivisions`` times, faces wound outward."""
+    t = (1 + 5**0.5) / 2
+    vertices = torch.tensor([[-1, t, 0], [1, t, 0], [-1, -t, 0], [1, -t, 0], [0, -1, t], [0, 1, t],
+                             [0, -1, -t], [0, 1, -t], [t, 0, -1], [t, 0, 1], [-t, 0, -1], [-t, 0, 1]], dtype=F64)
+    faces = torch.tensor([[0, 11, 5], [0, 5, 1], [0, 1, 7], [0, 7, 10], [0, 10, 11], [1, 5, 9], [5, 11, 4],
+                          [11, 10, 2], [10, 7, 6], [7, 1, 8], [3, 9, 4], [3, 4, 2], [3, 2, 6], [3, 6, 8],
+                          [3, 8, 9], [4, 9, 5], [2, 4, 11], [6, 2, 10], [8, 6, 7], [9, 8, 1]])
+    vertices = vertices / vertices.norm(dim=-1, keepdim=True)
+    for _ in range(subdivisions):
+        edges = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).sort(dim=-1).values
+        unique, inverse = torch.unique(edges, dim=0, return_inverse=True)
+        midpoints = torch.nn.functional.normalize(vertices[unique[:, 0]] + vertices[unique[:, 1]], dim=-1)
+        mid = inverse.reshape(3, -1).T + vertices.shape[0]  # (F,3): midpoints of edges 01, 12, 20
+        vertices = torch.cat([vertices, midpoints])
+        a, b, c = faces.T
+        ab, bc, ca = mid.T
+        faces = torch.cat([torch.stack(corners, -1) for corners in
+                           ((a, ab, ca), (b, bc, ab), (c, ca, bc), (ab, bc, ca))])
+    return vertices, faces
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    return icosphere(4)  # 2562 vertices; flat faces sag at most ~1 mm below the unit sphere
+
+
+@pytest.fixture()
+def sphere_proximity(sphere):
+    """A BodyProximity (default sign) fitted to the unit sphere."""
+    proximity = BodyProximity(sphere[1])
+    proximity.update(sphere[0])
+    return proximity
+
+
+def shell_points(count: int, low: float, high: float, seed: int = 0) -> torch.Tensor:
+    generator = torch.Generator().manual_seed(seed)
+    directions = torch.nn.functional.normalize(torch.randn(count, 3, dtype=F64, generator=generator), dim=-1)
+    return directions * (low + (high - low) * torch.rand(count, 1, dtype=F64, generator=generator))
+
+
+@pytest.mark.parametrize("sign", ["normal", "winding"])
+def test_sphere_distances_signs_and_outward_normals(sphere, sign):
+    vertices, faces = sphere
+    proximity = BodyProximity(faces, sign=sign)
+    proximity.update(vertices)
+    points = shell_points(2000, 0.5, 1.5)
+    nearest = proximity.query(points)
+    radius = points.norm(dim=-1)
+    assert nearest.signed_distance.dtype == F64 and nearest.face.dtype == torch.int64
+    assert bool(nearest.found.all())
+    assert torch.allclose(nearest.signed_distance, radius - 1.0, atol=1.5e-3)
+    clear = (radius - 1.0).abs() > 2e-3  # away from the faceted surface the sign must be exact
+    assert torch.equal(nearest.signed_distance[clear] < 0, radius[clear] < 1.0)
+    assert ((nearest.normal * points).sum(-1) / radius).min() > 0.99
+    assert torch.allclose(nearest.normal.norm(dim=-1), torch.ones(2000, dtype=F64), atol=1e-5)
+    on_surface = surface_points(vertices, faces, nearest.face, nearest.barycentric)
+    assert torch.allclose(on_surface, nearest.point, atol=1e-6)
+
+
+def test_auto_sign_picks_normal_for_closed_and_winding_for_open_meshes(sphere):
+    vertices, faces = sphere
+    assert BodyProximity(faces).sign == "normal" and is_closed_surface(faces)
+    upper = faces[vertices[faces].mean(dim=1)[:, 2] > -0.9]  # a sphere with a hole at the bottom
+    assert not is_closed_surface(upper)
+    proximity = BodyProximity(upper)
+    assert proximity.sign == "winding"
+    proximity.update(vertices)
+    inside = proximity.query(torch.tensor([[0.0, 0.0, -0.5], [0.3, 0.2, 0.1]]))
+    assert bool((inside.signed_distance < 0).all())
+
+
+def test_refit_follows_the_moved_body(sphere, sphere_proximity):
+    vertices, faces = sphere
+    proximity = sphere_proximity
+    points = shell_points(500, 0.8, 1.2, seed=1)
+    before = proximity.query(points)
+    offset = torch.tensor([3.0, -1.0, 0.5], dtype=F64)
+    proximity.update(vertices + offset)
+    after = proximity.query(points + offset)
+    assert torch.allclose(after.signed_distance, before.signed_distance, atol=1e-5)
+    # Near-ties between faces (points deep inside) may flip after float32 rounding.
+    same = after.face == before.face
+    assert same.float().mean() > 0.95
+    assert torch.allclose(after.point[same], before.point[same] + offset, atol=2e-6)
+    stale = proximity.query(torch.zeros(1, 3, dtype=F64), max_distance=5.0)  # the old centre: now 2.2 m outside
+    assert stale.signed_distance.item() == pytest.approx(offset.norm().item() - 1.0, abs=2e-3)
+
+
+def test_points_out_of_range_get_no_face(sphere, sphere_proximity):
+    vertices, faces = sphere
+    proximity = sphere_proximity
+    nearest = proximity.query(torch.tensor([[0.0, 0.0, 1.001], [0.0, 0.0, 3.0]]), max_distance=0.1)
+    assert nearest.face.tolist()[1] == -1 and nearest.face.tolist()[0] >= 0
+    assert proximity.query(torch.zeros(2, 4, 3)).signed_distance.shape == (2, 4)  # leading dims kept
+    assert nearest.signed_distance[1] == float("inf") and nearest.normal[1].abs().sum() == 0
+    origin, normal = face_planes(vertices, faces, nearest.face)
+    assert normal[1].abs().sum() == 0 and signed_distance(nearest.point, vertices, faces, nearest.face)[1] == float("inf")
+    with pytest.raises(RuntimeError):
+        BodyProximity(faces).query(torch.zeros(1, 3))
+
+
+def test_torch_signed_distance_matches_warp_near_the_surface_and_has_gradients(sphere, sphere_proximity):
+    vertices, faces = sphere
+    proximity = sphere_proximity
+    points = shell_points(1000, 0.99, 1.01, seed=2)
+    nearest = proximity.query(points)
+    interior = (nearest.barycentric > 1e-3).all(dim=-1)  # closest point inside its face: plane = triangle
+    assert interior.float().mean() > 0.8
+    body = vertices.clone().requires_grad_(True)
+    queries = points.clone().requires_grad_(True)
+    distance = signed_distance(queries, body, faces, nearest.face)
+    assert torch.allclose(distance[interior], nearest.signed_distance[interior], atol=1e-6)
+    assert (distance - nearest.signed_distance).abs().max() < 1e-3
+    grad_points, grad_body = torch.autograd.grad(distance.sum(), (queries, body))
+    assert torch.allclose(grad_points, nearest.normal, atol=1e-6)  # ∂d/∂x is the face normal
+    assert torch.isfinite(grad_body).all() and grad_body.abs().sum() > 0
+    few = nearest.face[:5]
+    assert torch.autograd.gradcheck(lambda p, b: signed_distance(p, b, faces, few), (queries[:5].detach().requires_grad_(True), body))
+
+
+def test_collision_energy_from_a_query_penalises_points_inside(sphere, sphere_proximity):
+    vertices, faces = sphere
+    proximity = sphere_proximity
+    points = torch.tensor([[0.0, 0.0, 0.97], [0.0, 0.0, 1.1]], dtype=F64)
+    nearest = proximity.query(points)
+    origin, normal = face_planes(vertices, faces, nearest.face)
+    energy = collision_energy(points, origin, normal, weight=1.0)
+    depth = 2e-3 - signed_distance(points, vertices, faces, nearest.face)[0]
+    assert energy.item() == pytest.approx(depth.item() ** 3, rel=1e-9) and depth > 0.02
