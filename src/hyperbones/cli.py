@@ -100,6 +100,46 @@ def cmd_check_builtins(args) -> int:
     return 0
 
 
+def cmd_simulate(args) -> int:
+    from hyperbones.simulate.pipeline import export_simulation, run_simulation
+
+    result, garment = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
+                                     vertices=args.vertices, piece=args.piece, material=args.material,
+                                     blend_in=args.blend_in, hold=args.hold)
+    paths = export_simulation(result, garment, args.out, preview=not args.no_preview, progress=not args.quiet)
+    if args.obj:
+        from hyperbones.export import write_obj_sequence
+
+        write_obj_sequence(Path(args.out) / "obj", result.garment_vertices.numpy(), garment.faces.numpy(),
+                           uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy())
+        paths["obj"] = Path(args.out) / "obj"
+    m = result.metrics
+    print(f"{m['method']} on {m['garment']} ({m['garment_vertices']} vertices), {m['motion']} ({m['frames']} frames): "
+          f"{m['ms_per_frame']:.2f} ms/frame, edge error {m['edge_error_pct']:.2f} %, "
+          f"collision {m['collision_pct']:.2f} %")
+    for kind, path in paths.items():
+        print(f"  {kind:8s} {Path(path).resolve()}")
+    return 0
+
+
+def cmd_garment_make(args) -> int:
+    from hyperbones.body import BodyShape, body_for
+    from hyperbones.garment import make_template, write_obj_garment
+    from hyperbones.garment.drape import drape
+
+    body = body_for(BodyShape.parse(args.body))
+    garment = make_template(args.type, body, args.vertices)
+    note = "not draped"
+    if not args.no_drape:
+        garment, report = drape(garment, body)
+        note = (f"draped: edge error {report.edge_error_pct:.2f} %, penetrating vertices "
+                f"{report.penetrating_before} -> {report.penetrating_after}")
+    path = write_obj_garment(args.out, garment) or args.out
+    print(f"wrote {Path(path).resolve()} ({garment.num_vertices} vertices, {len(garment.faces)} triangles, "
+          f"{len(garment.pinned)} pinned; {note})")
+    return 0
+
+
 def _source_fps_pair(text: str):
     name, _, value = text.partition("=")
     try:
@@ -141,6 +181,37 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--source-fps", type=_source_fps_pair, action="append", metavar="CLIP=FPS",
                        help="capture rate of a clip whose header is wrong, e.g. 74_06=60 (repeatable)")
     check.set_defaults(func=cmd_check_retarget)
+
+    simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
+                              description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
+    simulate.add_argument("--method", default="lbs", help="simulation method: lbs (default)")
+    simulate.add_argument("--garment", default="dress",
+                          help="a template (tshirt, tshirt-open, pants, long-skirt, dress, tight-dress), an .obj fitted "
+                               "to the default body, or a MakeHuman .mhclo (default: dress)")
+    simulate.add_argument("--motion", default="walk", help="a built-in motion or a CMU .bvh file (default: walk)")
+    simulate.add_argument("--body", default=None, help=BODY_HELP)
+    simulate.add_argument("--out", required=True, help="output folder")
+    simulate.add_argument("--frames", type=int, default=None, help="simulate only the first N frames")
+    simulate.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
+    simulate.add_argument("--piece", type=int, default=None, help="which piece of a multi-piece .mhclo outfit")
+    simulate.add_argument("--material", default=None,
+                          help="cloth: mu, lambda (Pa), thickness (m), density (kg/m2), bending, e.g. 'mu=30000'")
+    simulate.add_argument("--blend-in", type=int, default=15, metavar="N", help="A-pose transition frames (default 15)")
+    simulate.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended to the motion")
+    simulate.add_argument("--obj", action="store_true", help="also write an OBJ per frame into DIR/obj/")
+    simulate.add_argument("--no-preview", action="store_true", help="skip the preview video")
+    simulate.add_argument("--quiet", action="store_true", help="no progress bars")
+    simulate.set_defaults(func=cmd_simulate)
+
+    garment = sub.add_parser("garment", help="make the built-in garments")
+    garment_sub = garment.add_subparsers(dest="garment_command", metavar="ACTION", required=True)
+    make = garment_sub.add_parser("make", help="a template fitted (and draped) on a body, written as OBJ")
+    make.add_argument("type", help="tshirt, tshirt-open, pants, long-skirt, dress or tight-dress")
+    make.add_argument("--body", default=None, help=BODY_HELP)
+    make.add_argument("--vertices", type=int, default=5000, help="about this many vertices (1000-40000, default 5000)")
+    make.add_argument("--out", required=True, help="output .obj")
+    make.add_argument("--no-drape", action="store_true", help="write the fitted template without draping it")
+    make.set_defaults(func=cmd_garment_make)
 
     builtins = sub.add_parser("check-builtins", help="table of smoothness and ground contact of the built-in motions")
     builtins.add_argument("--body", default=None, help=BODY_HELP)

@@ -1,0 +1,1 @@
+"""Simulation methods (LBS baseline; the neural ones follow) and the simulate / eval pipelines."""

@@ -1,0 +1,50 @@
+"""Metrics of a simulated garment sequence, as REFERENCE.md defines them."""
+
+from __future__ import annotations
+
+import torch
+
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.metrics import HOOD_COLLISION_THRESHOLD, area_error_pct, collision_pct, edge_error_pct, mean_energies
+
+
+def body_signed_distances(garment_vertices: torch.Tensor, body_vertices: torch.Tensor,
+                          body_faces: torch.Tensor) -> torch.Tensor:
+    """(T,V,3), (T,Vb,3), (Fb,3) -> (T,V) signed distance of each garment vertex to the posed body."""
+    proximity = BodyProximity(body_faces)
+    distances = []
+    for frame in range(garment_vertices.shape[0]):  # one BVH refit and one batched query per frame
+        proximity.update(body_vertices[frame])
+        distances.append(proximity.query(garment_vertices[frame], max_distance=0.5).signed_distance)
+    return torch.stack(distances)
+
+
+def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_vertices: torch.Tensor,
+                     body_faces: torch.Tensor, origin: torch.Tensor, dt: float) -> dict[str, float]:
+    """Every metric of REFERENCE.md for one sequence.
+
+    Args:
+        garment_vertices: (T,V,3); rest: the garment's rest (canonical template) state.
+        body_vertices: (T,Vb,3) posed body; body_faces: (Fb,3).
+        origin: (3,) the body root at frame 0: gravity energy is measured from it.
+        dt: seconds per frame.
+
+    Returns:
+        edge_error_pct, area_error_pct (GAPS), collision_pct (d < 0), collision_1mm_pct
+        (HOOD: d < 1 mm), and the mean per-frame strain, bending, inertia, gravity (J,
+        HOOD protocol, frames t >= 2).
+    """
+    x = garment_vertices.double()
+    distances = body_signed_distances(garment_vertices, body_vertices, body_faces)
+    metrics = {
+        "edge_error_pct": float(edge_error_pct(x, rest)),
+        "area_error_pct": float(area_error_pct(x, rest)),
+        "collision_pct": float(collision_pct(distances, 0.0)),
+        "collision_1mm_pct": float(collision_pct(distances, HOOD_COLLISION_THRESHOLD)),
+    }
+    if x.shape[0] >= 3:
+        energies = mean_energies(x - origin.double(), rest, dt=dt)
+        metrics.update({"strain": float(energies["stretching"]), "bending": float(energies["bending"]),
+                        "inertia": float(energies["inertia"]), "gravity": float(energies["gravity"])})
+    return metrics
