@@ -140,6 +140,14 @@ def cmd_garment_make(args) -> int:
     return 0
 
 
+def cmd_check_drape(args) -> int:
+    from hyperbones.garment.report import drape_table
+
+    resolutions = [int(v) for v in args.resolutions.split(",")]
+    print(drape_table(resolutions, args.bodies.split(";"), [Path(p) for p in args.mhclo], progress=not args.quiet))
+    return 0
+
+
 def _source_fps_pair(text: str):
     name, _, value = text.partition("=")
     try:
@@ -212,6 +220,14 @@ def build_parser() -> argparse.ArgumentParser:
     make.add_argument("--out", required=True, help="output .obj")
     make.add_argument("--no-drape", action="store_true", help="write the fitted template without draping it")
     make.set_defaults(func=cmd_garment_make)
+
+    check_drape = sub.add_parser("check-drape", help="table of drape quality over garments, resolutions and bodies")
+    check_drape.add_argument("mhclo", nargs="*", help="MakeHuman .mhclo garments to include (every piece)")
+    check_drape.add_argument("--resolutions", default="2500,8000,25000", help="template vertex counts (comma list)")
+    check_drape.add_argument("--bodies", default="gender=0,weight=0,height=0;gender=1,muscle=1,weight=1,height=1;"
+                             "gender=1,weight=0,height=0,proportions=1", help="body shapes separated by ';'")
+    check_drape.add_argument("--quiet", action="store_true", help="no progress bar")
+    check_drape.set_defaults(func=cmd_check_drape)
 
     builtins = sub.add_parser("check-builtins", help="table of smoothness and ground contact of the built-in motions")
     builtins.add_argument("--body", default=None, help=BODY_HELP)

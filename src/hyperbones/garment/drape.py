@@ -36,6 +36,7 @@ class DrapeReport:
     penetrating_before: int
     penetrating_after: int
     rounds: int
+    rest_vertices: torch.Tensor | None = None  # (V,3) the rest shape used, when drape chose it
 
 
 def _project_outside(points: torch.Tensor, proximity: BodyProximity, margin: float) -> tuple[torch.Tensor, int]:
@@ -52,8 +53,9 @@ def drape(garment: Garment, body: Body, max_rounds: int = 20, iterations_per_rou
     """Settle ``garment`` on ``body``'s canonical A-pose.
 
     Args:
-        garment: the garment in canonical space; its current positions are also its rest
-            shape unless ``rest`` is given (shape transfer passes the original rest).
+        garment: the garment in canonical space; its current positions (pushed out of the
+            skin) are also its rest shape unless ``rest`` is given (shape transfer passes the
+            original pattern).
         max_rounds: outer rounds at most, each re-finding the nearest body faces; it stops
             once a round lowers the energy by less than ``tolerance`` (relative).
         iterations_per_round: L-BFGS iterations per round.
@@ -61,12 +63,15 @@ def drape(garment: Garment, body: Body, max_rounds: int = 20, iterations_per_rou
     Returns:
         The draped garment (same topology, UVs, pins) and a report.
     """
-    rest = rest or ClothRest.from_mesh(garment.vertices.double(), garment.faces, garment.material)
-    rest = rest.to(torch.float64)
     proximity = BodyProximity(body.faces)
     proximity.update(body.rest_vertices)
     body_vertices = body.rest_vertices.double()
     x0, penetrating_before = _project_outside(garment.vertices, proximity, COLLISION_MARGIN)
+    # Without an explicit pattern the rest shape is the fit itself, minus what poked
+    # through the skin (MakeHuman fits made on another base body do, by a few mm).
+    rest_vertices = x0 if rest is None else None
+    rest = rest or ClothRest.from_mesh(x0.double(), garment.faces, garment.material)
+    rest = rest.to(torch.float64)
     x = x0.double()
     free = torch.ones(len(x), dtype=torch.bool)
     free[garment.pinned] = False
@@ -112,6 +117,7 @@ def drape(garment: Garment, body: Body, max_rounds: int = 20, iterations_per_rou
         edge_error_pct=float(edge_error_pct(x_final[None].double(), rest)),
         area_error_pct=float(area_error_pct(x_final[None].double(), rest)),
         penetrating_before=penetrating_before, penetrating_after=penetrating_after, rounds=rounds,
+        rest_vertices=rest_vertices,
     )
     return garment.with_vertices(x_final), report
 

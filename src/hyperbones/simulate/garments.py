@@ -25,22 +25,21 @@ from hyperbones.garment.templates import DEFAULT_VERTICES, TEMPLATES, make_templ
 from hyperbones.io_utils import atomic_path
 from hyperbones.physics.material import Material
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 def cache_dir() -> Path:
     return Path(os.environ.get("HYPERBONES_CACHE_DIR", Path.home() / ".cache" / "hyperbones"))
 
 
-def _undraped(source: str, body: Body, vertices: int | None, piece: int | None) -> tuple[Garment, torch.Tensor]:
-    """The garment before draping on ``body`` and its rest (pattern) shape."""
+def _undraped(source: str, body: Body, vertices: int | None, piece: int | None) -> tuple[Garment, torch.Tensor | None]:
+    """The garment before draping on ``body`` and its rest (pattern) shape, or None when
+    the fit itself is the rest shape (templates, MakeHuman clothes)."""
     if source in TEMPLATES:
-        garment = make_template(source, body, vertices or DEFAULT_VERTICES)
-        return garment, garment.vertices
+        return make_template(source, body, vertices or DEFAULT_VERTICES), None
     path = Path(source)
     if path.suffix.lower() == ".mhclo":
-        garment = load_mhclo_garment(path, body, piece=piece)
-        return garment, garment.vertices
+        return load_mhclo_garment(path, body, piece=piece), None
     if path.suffix.lower() == ".obj":
         # An OBJ garment is made for the default body: its pattern stays, the body changes.
         garment = load_obj_garment(path)
@@ -88,8 +87,10 @@ def draped_garment(source: str, body: Body, *, vertices: int | None = None, piec
                        material, undraped.name)
     from hyperbones.physics.cloth import ClothRest
 
-    rest = ClothRest.from_mesh(rest_vertices.double(), undraped.faces, material)
-    garment, _ = drape(undraped, body, rest=rest)
+    rest = None if rest_vertices is None else ClothRest.from_mesh(rest_vertices.double(), undraped.faces, material)
+    garment, report = drape(undraped, body, rest=rest)
+    if rest_vertices is None:
+        rest_vertices = report.rest_vertices
     if use_cache:
         with atomic_path(path) as tmp:
             torch.save({"vertices": garment.vertices, "faces": garment.faces, "uvs": garment.uvs,
