@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 
 import pytest
+
+# Draped garments are cached on disk; tests use their own cache, never the user's.
+os.environ["HYPERBONES_CACHE_DIR"] = tempfile.mkdtemp(prefix="hyperbones-test-cache-")
 
 
 SHARED = Path(__file__).resolve().parents[2] / "shared"

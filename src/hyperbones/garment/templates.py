@@ -189,13 +189,13 @@ class _Solid:
                     _, joints = self.owner(vertices[faces].mean(1))
         if spec.front_opening:
             centre = vertices[faces].mean(1)
-            front = (centre[:, 1] < float(lm.shoulder["Left"][1])) & (centre[:, 2] < self.top - 0.03)
+            front = centre[:, 1] < float(lm.shoulder["Left"][1])  # neckline to hem
             for sign in (1.0, -1.0):
                 half = front & (sign * centre[:, 0] > 0)
                 vertices, faces = slice_mesh(vertices, faces, np.array([sign, 0.0, 0.0]),
                                              np.array([sign * spec.front_opening / 2, 0.0, 0.0]), half)
                 centre = vertices[faces].mean(1)
-                front = (centre[:, 1] < float(lm.shoulder["Left"][1])) & (centre[:, 2] < self.top - 0.03)
+                front = centre[:, 1] < float(lm.shoulder["Left"][1])
         return largest_piece(vertices, faces)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:

@@ -14,7 +14,7 @@ from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity
 
-SMOOTHING_LENGTH = 0.10  # metres the weights are diffused over
+SMOOTHING_LENGTH = 0.15  # metres the weights are diffused over
 
 
 def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float = SMOOTHING_LENGTH) -> torch.Tensor:
