@@ -82,3 +82,13 @@ def test_simulate_errors(tmp_path, capsys):
     assert "missing.obj: file not found" in capsys.readouterr().err
     assert main(["simulate", "--method", "magic", "--out", str(tmp_path / "x")]) == 2
     assert "unknown method 'magic'" in capsys.readouterr().err
+
+
+def test_eval_writes_report(tmp_path, capsys):
+    code = main(["eval", "--methods", "lbs", "--garments", "tight-dress,long-skirt", "--motions", "walk,jump",
+                 "--frames", "15", "--vertices", "1500", "--out", str(tmp_path), "--quiet"])
+    assert code == 0
+    runs = json.loads((tmp_path / "report.json").read_text())
+    assert len(runs) == 4 and {r["motion"] for r in runs} == {"walk", "jump"}
+    table = (tmp_path / "report.md").read_text()
+    assert "| tight-dress | lbs |" in table and "| long-skirt | lbs |" in table and "ε_e" in table

@@ -148,6 +148,18 @@ def cmd_check_drape(args) -> int:
     return 0
 
 
+def cmd_eval(args) -> int:
+    from hyperbones.simulate.evaluate import evaluate
+
+    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
+    bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
+    report = evaluate(split(args.methods), split(args.garments), split(args.motions), bodies, args.out,
+                      frames=args.frames, vertices=args.vertices, progress=not args.quiet)
+    print(report.read_text())
+    print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
+    return 0
+
+
 def _source_fps_pair(text: str):
     name, _, value = text.partition("=")
     try:
@@ -210,6 +222,18 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--no-preview", action="store_true", help="skip the preview video")
     simulate.add_argument("--quiet", action="store_true", help="no progress bars")
     simulate.set_defaults(func=cmd_simulate)
+
+    evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
+                                description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
+    evaluation.add_argument("--methods", default="lbs", help="comma list of methods (default: lbs)")
+    evaluation.add_argument("--garments", default="tshirt,dress,long-skirt,pants", help="comma list of garments")
+    evaluation.add_argument("--motions", default="walk,run", help="comma list of motions (built-in names or .bvh)")
+    evaluation.add_argument("--bodies", default=None, help="body shapes separated by ';' (default: the default body)")
+    evaluation.add_argument("--frames", type=int, default=None, help="only the first N frames of each motion")
+    evaluation.add_argument("--vertices", type=int, default=None, help="template resolution")
+    evaluation.add_argument("--out", required=True, help="output folder")
+    evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
+    evaluation.set_defaults(func=cmd_eval)
 
     garment = sub.add_parser("garment", help="make the built-in garments")
     garment_sub = garment.add_subparsers(dest="garment_command", metavar="ACTION", required=True)
