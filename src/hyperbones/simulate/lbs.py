@@ -1,8 +1,9 @@
 """The LBS baseline: the garment skinned to the body skeleton.
 
 Weights come from the nearest body surface point (its vertices' skin weights, blended
-barycentrically) and are then diffused over the garment's own edges, so that a skirt
-blends both thighs instead of tearing between the legs.
+barycentrically) and are then diffused over the garment's own edges where the cloth hangs
+away from the body, so that a skirt blends both thighs instead of tearing between the
+legs, while cloth lying on the skin keeps the skin's weights and moves with it.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity
 
 SMOOTHING_LENGTH = 0.15  # metres the weights are diffused over
+FREE_DISTANCE = 0.05  # cloth this far from the skin (or more) diffuses fully
 
 
 def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float = SMOOTHING_LENGTH) -> torch.Tensor:
@@ -33,8 +35,9 @@ def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float =
     edge_length = float((garment.vertices[edges[:, 0]] - garment.vertices[edges[:, 1]]).norm(dim=-1).mean())
     # Half-step Jacobi diffusion spreads about one edge length per sqrt(2 steps).
     steps = int(min(500, max(1, 2 * (smoothing_length / max(edge_length, 1e-4)) ** 2)))
+    rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)[:, None]
     for _ in range(steps):
-        weights = 0.5 * weights + 0.5 * torch.sparse.mm(adjacency, weights) / degree
+        weights = (1 - rate) * weights + rate * torch.sparse.mm(adjacency, weights) / degree
     return weights / weights.sum(1, keepdim=True)
 
 
