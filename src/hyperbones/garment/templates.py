@@ -50,11 +50,9 @@ class Landmarks:
 
     hip: float          # hip joints
     waist: float        # natural waist, between hips and the lower ribs
-    chest: float
     neck: float         # base of the neck
     knee: float
     ankle: float
-    crotch: float
     shoulder: dict      # side -> (3,) shoulder joint
     elbow: dict         # side -> (3,) elbow joint
 
@@ -65,11 +63,9 @@ class Landmarks:
         return cls(
             hip=hip,
             waist=float(p[J["Spine"], 2]) - 0.02,
-            chest=float(p[J["Spine1"], 2]),
             neck=float(p[J["Neck"], 2]) + 0.01,
             knee=float(p[J["LeftLeg"], 2]),
             ankle=float(p[J["LeftFoot"], 2]),
-            crotch=hip - 0.06,
             shoulder={s: p[J[f"{s}Arm"]] for s in ("Left", "Right")},
             elbow={s: p[J[f"{s}ForeArm"]] for s in ("Left", "Right")},
         )
