@@ -70,20 +70,26 @@ def cmd_render(args) -> int:
     return 0
 
 
+def _print_run(result, paths: dict) -> None:
+    """One line of what a simulation measured, then where its outputs are."""
+    m = result.metrics
+    print(f"{m['method']} on {m['garment']} ({m['garment_vertices']} vertices), {m['motion']} ({m['frames']} frames): "
+          f"{m['ms_per_frame']:.2f} ms/frame, edge error {m['edge_error_pct']:.2f} %, "
+          f"collision {m['collision_pct']:.2f} %")
+    for kind, path in paths.items():
+        print(f"  {kind:8s} {Path(path).resolve()}")
+
+
 def cmd_demo(args) -> int:
     from hyperbones.simulate.pipeline import export_simulation, run_simulation
 
-    out = Path(args.out).resolve()
     start = time.perf_counter()
     print("hyperbones demo: the default dress on the default Anny body, walking, simulated with the LBS baseline\n"
           "(the first run on a machine builds Anny's cache and drapes the dress: about a minute)")
-    result, garment = run_simulation("lbs", "dress", "walk", None, hold=1.0)
-    paths = export_simulation(result, garment, out, progress=not args.quiet)
-    m = result.metrics
-    print(f"done in {time.perf_counter() - start:.1f} s: {m['frames']} frames, {m['ms_per_frame']:.2f} ms/frame, "
-          f"edge error {m['edge_error_pct']:.2f} %, collision {m['collision_pct']:.2f} %")
-    for kind, path in paths.items():
-        print(f"  {kind:8s} {Path(path).resolve()}")
+    result = run_simulation("lbs", "dress", "walk", None, hold=1.0)
+    paths = export_simulation(result, Path(args.out).resolve(), progress=not args.quiet)
+    print(f"done in {time.perf_counter() - start:.1f} s")
+    _print_run(result, paths)
     return 0
 
 
@@ -104,22 +110,11 @@ def cmd_check_builtins(args) -> int:
 def cmd_simulate(args) -> int:
     from hyperbones.simulate.pipeline import export_simulation, run_simulation
 
-    result, garment = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
-                                     vertices=args.vertices, piece=args.piece, material=args.material,
-                                     blend_in=args.blend_in, hold=args.hold)
-    paths = export_simulation(result, garment, args.out, preview=not args.no_preview, progress=not args.quiet)
-    if args.obj:
-        from hyperbones.export import write_obj_sequence
-
-        write_obj_sequence(Path(args.out) / "obj", result.garment_vertices.numpy(), garment.faces.numpy(),
-                           uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy())
-        paths["obj"] = Path(args.out) / "obj"
-    m = result.metrics
-    print(f"{m['method']} on {m['garment']} ({m['garment_vertices']} vertices), {m['motion']} ({m['frames']} frames): "
-          f"{m['ms_per_frame']:.2f} ms/frame, edge error {m['edge_error_pct']:.2f} %, "
-          f"collision {m['collision_pct']:.2f} %")
-    for kind, path in paths.items():
-        print(f"  {kind:8s} {Path(path).resolve()}")
+    result = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
+                            vertices=args.vertices, piece=args.piece, material=args.material,
+                            blend_in=args.blend_in, hold=args.hold)
+    paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet)
+    _print_run(result, paths)
     return 0
 
 

@@ -23,7 +23,7 @@ def evaluate(methods: list[str], garments: list[str], motions: list[str], bodies
     runs = []
     combos = [(m, g, mo, b) for g in garments for b in bodies for mo in motions for m in methods]
     for method, garment, motion, body in tqdm(combos, desc="eval", disable=not progress):
-        result, _ = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices)
+        result = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices)
         runs.append(result.metrics)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -16,7 +16,8 @@ import torch
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import ParameterError
-from hyperbones.export import UsdMesh, write_frames_npz, write_pc2, write_usd
+from hyperbones.garment.garment import Garment
+from hyperbones.export import UsdMesh, write_frames_npz, write_obj_sequence, write_pc2, write_usd
 from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import load_motion
 from hyperbones.physics.cloth import ClothRest
@@ -33,8 +34,8 @@ GARMENT_COLOR = (0.25, 0.45, 0.8)
 class SimulationResult:
     """A simulated sequence and everything needed to export and score it."""
 
+    garment: Garment                # the draped canonical garment (topology, UVs)
     garment_vertices: torch.Tensor  # (T,V,3)
-    garment_faces: torch.Tensor
     body_vertices: torch.Tensor     # (T,Vb,3)
     body_faces: torch.Tensor
     joint_positions: torch.Tensor   # (T,31,3)
@@ -44,12 +45,8 @@ class SimulationResult:
 
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
-                   blend_in: int = 15, hold: float = 0.0):
-    """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
-
-    Returns:
-        (SimulationResult, the draped canonical Garment).
-    """
+                   blend_in: int = 15, hold: float = 0.0) -> SimulationResult:
+    """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics."""
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     if frames is not None and frames < 1:
@@ -73,24 +70,26 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                     "method": method, "garment": garment if Path(garment).suffix == "" else Path(garment).name,
                     "garment_vertices": draped.num_vertices, "motion": the_motion.name, "body": shape.label(),
                     "fps": the_motion.fps})
-    return SimulationResult(garment_vertices, draped.faces, posed.vertices, the_body.faces,
-                            posed.joint_positions, the_motion.fps, metrics), draped
+    return SimulationResult(draped, garment_vertices, posed.vertices, the_body.faces,
+                            posed.joint_positions, the_motion.fps, metrics)
 
 
-def export_simulation(result: SimulationResult, garment, out_dir: str | Path, preview: bool = True,
+def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,
                       progress: bool = True) -> dict[str, Path]:
-    """Write the output contract into ``out_dir``; returns the written paths by kind."""
+    """Write the output contract into ``out_dir`` (and, with ``obj``, an OBJ per frame into
+    ``out_dir/obj``); returns the written paths by kind."""
+    garment = result.garment
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = {
         "frames": write_frames_npz(out / "frames.npz", garment_vertices=result.garment_vertices,
-                                   garment_faces=result.garment_faces, body_vertices=result.body_vertices,
+                                   garment_faces=garment.faces, body_vertices=result.body_vertices,
                                    body_faces=result.body_faces, joint_positions=result.joint_positions,
                                    fps=result.fps),
         "pc2": write_pc2(out / "garment.pc2", result.garment_vertices.numpy(), fps=result.fps),
         "usd": write_usd(out / "scene.usd", [
             UsdMesh("body", result.body_vertices.numpy(), result.body_faces.numpy()),
-            UsdMesh("garment", result.garment_vertices.numpy(), result.garment_faces.numpy(),
+            UsdMesh("garment", result.garment_vertices.numpy(), garment.faces.numpy(),
                     uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy(), display_color=GARMENT_COLOR),
         ], fps=result.fps),
     }
@@ -102,9 +101,13 @@ def export_simulation(result: SimulationResult, garment, out_dir: str | Path, pr
         title = f"{m['method']} | {m['garment']} | {m['motion']} | body {m['body']}"
         video, sheet = render_preview(
             [MeshSequence(result.body_vertices.numpy(), result.body_faces.numpy(), BODY_COLOR, "body"),
-             MeshSequence(result.garment_vertices.numpy(), result.garment_faces.numpy(), GARMENT_COLOR, "garment")],
+             MeshSequence(result.garment_vertices.numpy(), garment.faces.numpy(), GARMENT_COLOR, "garment")],
             out / "preview.mp4", result.fps, title=title, progress=progress)
         paths.update(preview=video, sheet=sheet)
+    if obj:
+        write_obj_sequence(out / "obj", result.garment_vertices.numpy(), garment.faces.numpy(),
+                           uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy())
+        paths["obj"] = out / "obj"
     with atomic_path(out / "metrics.json") as tmp:
         tmp.write_text(json.dumps(result.metrics, indent=2) + "\n")
     paths["metrics"] = out / "metrics.json"
