@@ -112,7 +112,8 @@ def cmd_simulate(args) -> int:
 
     result = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
                             vertices=args.vertices, piece=args.piece, material=args.material,
-                            blend_in=args.blend_in, hold=args.hold)
+                            blend_in=args.blend_in, hold=args.hold, checkpoint=args.checkpoint, device=args.device,
+                            progress=not args.quiet)
     paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet)
     _print_run(result, paths)
     return 0
@@ -150,9 +151,51 @@ def cmd_eval(args) -> int:
     split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
     bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
     report = evaluate(split(args.methods), split(args.garments), split(args.motions), bodies, args.out,
-                      frames=args.frames, vertices=args.vertices, progress=not args.quiet)
+                      frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
+                      device=args.device, progress=not args.quiet)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
+    return 0
+
+
+def cmd_train(args) -> int:
+    from hyperbones.training.config import TeacherTrainingConfig
+    from hyperbones.training.trainer import TeacherTrainer
+
+    config = TeacherTrainingConfig.load(args.config)
+    trainer = TeacherTrainer(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
+    try:
+        step = trainer.train()
+    finally:
+        trainer.close()
+    if trainer.is_main:
+        print(f"trained to step {step}; checkpoint {trainer.checkpoint_path.resolve()}, "
+              f"TensorBoard logs {(trainer.run_dir / 'tensorboard').resolve()}")
+    return 0
+
+
+def cmd_export_teacher(args) -> int:
+    from hyperbones.training.checkpoint import export_weights
+
+    path = export_weights(args.checkpoint, args.out)
+    print(f"wrote {Path(path).resolve()}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    import json
+
+    from hyperbones.io_utils import atomic_path
+    from hyperbones.runtime.bench import bench, bench_table, records_as_dicts
+
+    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
+    records = bench(split(args.methods), split(args.garments), vertices=args.vertices, device=args.device,
+                    frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint, progress=not args.quiet)
+    print(bench_table(records))
+    if args.json:
+        with atomic_path(args.json) as tmp:
+            tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
+        print(f"wrote {Path(args.json).resolve()}")
     return 0
 
 
@@ -200,7 +243,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
-    simulate.add_argument("--method", default="lbs", help="simulation method: lbs (default)")
+    simulate.add_argument("--method", default="lbs",
+                          help="lbs (default: skinning, no dynamics) or teacher (the physics-trained MeshGraphNet)")
+    simulate.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the one shipped in the package)")
+    simulate.add_argument("--device", default="auto", help="cpu, cuda or auto (CUDA when present; default)")
     simulate.add_argument("--garment", default="dress",
                           help="a template (tshirt, tshirt-open, pants, long-skirt, dress, tight-dress), an .obj fitted "
                                "to the default body, or a MakeHuman .mhclo (default: dress)")
@@ -221,7 +267,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
                                 description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
-    evaluation.add_argument("--methods", default="lbs", help="comma list of methods (default: lbs)")
+    evaluation.add_argument("--methods", default="lbs", help="comma list of methods: lbs, teacher (default: lbs)")
+    evaluation.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the shipped one)")
+    evaluation.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    evaluation.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended to each motion")
     evaluation.add_argument("--garments", default="tshirt,dress,long-skirt,pants", help="comma list of garments")
     evaluation.add_argument("--motions", default="walk,run", help="comma list of motions (built-in names or .bvh)")
     evaluation.add_argument("--bodies", default=None, help="body shapes separated by ';' (default: the default body)")
@@ -230,6 +279,38 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--out", required=True, help="output folder")
     evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
     evaluation.set_defaults(func=cmd_eval)
+
+    train = sub.add_parser("train", help="train the teacher (Module C) self-supervised with the physics energies",
+                           description="Trains from a TOML config (see configs/teacher*.toml). Writes OUT/checkpoint.pt "
+                                       "(atomic, every train.checkpoint_every steps, config inside) and TensorBoard logs "
+                                       "in OUT/tensorboard. Under torchrun it trains on every process (DDP).")
+    train.add_argument("--config", required=True, help="TOML training config")
+    train.add_argument("--out", required=True, help="run folder")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    train.add_argument("--max-steps", type=int, default=None, help="stop at this step (below train.steps)")
+    train.add_argument("--quiet", action="store_true", help="no progress bar")
+    train.set_defaults(func=cmd_train)
+
+    export = sub.add_parser("export-teacher", help="keep only what inference needs from a training checkpoint")
+    export.add_argument("checkpoint", help="a run's checkpoint.pt")
+    export.add_argument("--out", required=True, help="output .pt (model weights + config)")
+    export.set_defaults(func=cmd_export_teacher)
+
+    bench = sub.add_parser("bench", help="median ms per frame of each method on each garment",
+                           description="Times each method frame by frame on the default body walking, after a warm-up "
+                                       "(CUDA timings synchronised). Prints a table; --json writes records "
+                                       "{method, garment, vertices, device, batch, ms_per_frame}.")
+    bench.add_argument("--methods", default="lbs,teacher", help="comma list (default: lbs,teacher)")
+    bench.add_argument("--garments", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
+                       help="comma list of garments (default: the six templates)")
+    bench.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
+    bench.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    bench.add_argument("--frames", type=int, default=30, help="timed frames per run (default 30)")
+    bench.add_argument("--warmup", type=int, default=5, help="untimed frames first (default 5)")
+    bench.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the shipped one)")
+    bench.add_argument("--json", default=None, help="also write the records to this JSON file")
+    bench.add_argument("--quiet", action="store_true", help="no progress bar")
+    bench.set_defaults(func=cmd_bench)
 
     garment = sub.add_parser("garment", help="make the built-in garments")
     garment_sub = garment.add_subparsers(dest="garment_command", metavar="ACTION", required=True)

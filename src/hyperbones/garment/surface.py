@@ -92,6 +92,12 @@ def isotropic_remesh(vertices: np.ndarray, faces: np.ndarray, target_vertices: i
         if abs(count - target_vertices) <= 0.1 * target_vertices:
             break
         length *= float(np.sqrt(count / target_vertices))
+    # Merge the ends of edges far shorter than the target (a cut's corner can leave one of
+    # a fraction of a millimetre): such a sliver makes the cloth locally stiff.
+    meshes.meshing_merge_close_vertices(threshold=pymeshlab.PureValue(0.2 * length))
+    meshes.meshing_remove_null_faces()
+    meshes.meshing_remove_duplicate_faces()
+    mesh = meshes.current_mesh()
     vertices, faces = mesh.vertex_matrix().copy(), mesh.face_matrix().astype(np.int64)
     # A corner where two cuts meet can keep a sliver the remesher could not flip away; it
     # lies on the rim, so dropping it leaves the surface and its openings as they are.

@@ -50,3 +50,33 @@ class Material:
             except ValueError:
                 raise ParameterError(f"--material: {key}={raw!r} is not a number") from None
         return cls(**values)
+
+
+# HOOD's training ranges (REFERENCE.md, "Material"): (low, high, log-scale).
+TRAINING_RANGES: dict[str, tuple[float, float, bool]] = {
+    "lame_mu": (15909.0, 63636.0, True),
+    "lame_lambda": (3535.0, 93334.0, False),
+    "bending": (6.37e-8, 1.31e-3, True),
+    "density": (0.0434, 0.7, False),
+}
+
+
+def material_features(material: Material) -> list[float]:
+    """The four trained-over parameters (μ, λ, k_b, ρ) mapped to [0, 1] over HOOD's ranges
+    (log scale for μ and k_b); values outside the ranges map outside [0, 1]."""
+    out = []
+    for name, (low, high, log) in TRAINING_RANGES.items():
+        value = getattr(material, name)
+        if log:
+            value, low, high = math.log(value), math.log(low), math.log(high)
+        out.append((value - low) / (high - low))
+    return out
+
+
+def sample_material(uniform) -> Material:
+    """A random material over HOOD's ranges; ``uniform()`` returns a float in [0, 1)."""
+    values = {}
+    for name, (low, high, log) in TRAINING_RANGES.items():
+        u = uniform()
+        values[name] = math.exp(math.log(low) + u * (math.log(high) - math.log(low))) if log else low + u * (high - low)
+    return Material(**values)

@@ -8,10 +8,13 @@ legs, while cloth lying on the skin keeps the skin's weights and moves with it.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+
 import torch
 
-from hyperbones.body.anny_body import Body
+from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
+from hyperbones.geometry.diffusion import diffuse, diffusion_steps
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity
 
@@ -27,17 +30,9 @@ def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float =
     corners = body.faces[nearest.face.clamp(min=0)]  # (V,3)
     weights = (nearest.barycentric[..., None] * body.skin_weights[corners]).sum(1)
     edges = garment.edges()
-    n = garment.num_vertices
-    index = torch.cat([edges, edges.flip(1)]).T
-    adjacency = torch.sparse_coo_tensor(index, torch.ones(index.shape[1]), (n, n),
-                                        check_invariants=False).coalesce()
-    degree = torch.sparse.sum(adjacency, 1).to_dense().clamp(min=1)[:, None]
     edge_length = float((garment.vertices[edges[:, 0]] - garment.vertices[edges[:, 1]]).norm(dim=-1).mean())
-    # Half-step Jacobi diffusion spreads about one edge length per sqrt(2 steps).
-    steps = int(min(500, max(1, 2 * (smoothing_length / max(edge_length, 1e-4)) ** 2)))
     rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)[:, None]
-    for _ in range(steps):
-        weights = (1 - rate) * weights + rate * torch.sparse.mm(adjacency, weights) / degree
+    weights = diffuse(weights, edges, rate, diffusion_steps(smoothing_length, edge_length))
     return weights / weights.sum(1, keepdim=True)
 
 
@@ -46,10 +41,15 @@ class LbsMethod:
 
     name = "lbs"
 
-    def __init__(self, garment: Garment, body: Body):
+    def __init__(self, garment: Garment, body: Body, **_):
         self.rest_vertices = garment.vertices
         self.weights = garment_skin_weights(garment, body)
 
-    def run(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
-        """(T,31,4,4) body skinning transforms -> (T,V,3) garment positions."""
-        return linear_blend_skinning(self.rest_vertices, self.weights, skinning_transforms)
+    def run(self, posed: PosedBody) -> torch.Tensor:
+        """A posed body (T frames) -> (T,V,3) garment positions."""
+        return linear_blend_skinning(self.rest_vertices, self.weights, posed.skinning_transforms)
+
+    def frames(self, posed: PosedBody) -> Iterator[torch.Tensor]:
+        """Yield each frame's (V,3) garment positions, one frame at a time (for benchmarks)."""
+        for t in range(posed.skinning_transforms.shape[0]):
+            yield linear_blend_skinning(self.rest_vertices, self.weights, posed.skinning_transforms[t : t + 1])[0]

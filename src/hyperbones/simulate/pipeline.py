@@ -26,7 +26,15 @@ from hyperbones.simulate.evaluation import sequence_metrics
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.lbs import LbsMethod
 
-METHODS = {"lbs": LbsMethod}
+def _teacher(*args, **kwargs):
+    from hyperbones.simulate.teacher import TeacherMethod
+
+    return TeacherMethod(*args, **kwargs)
+
+
+METHODS = {"lbs": LbsMethod, "teacher": _teacher}
+"""Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
+the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)
 
 
@@ -45,8 +53,13 @@ class SimulationResult:
 
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
-                   blend_in: int = 15, hold: float = 0.0) -> SimulationResult:
-    """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics."""
+                   blend_in: int = 15, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
+                   progress: bool = False) -> SimulationResult:
+    """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
+
+    ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
+    CUDA when present) apply to the learnt methods; LBS ignores them.
+    """
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     if frames is not None and frames < 1:
@@ -59,9 +72,10 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
     cloth = Material.parse(material)
     draped, rest_vertices = draped_garment(garment, the_body, vertices=vertices, piece=piece, material=cloth)
     posed = the_body.pose(the_motion.joint_rotations, the_motion.root_translation)
-    solver = METHODS[method](draped, the_body)
+    solver = METHODS[method](draped, the_body, rest_vertices=rest_vertices, material=cloth, checkpoint=checkpoint,
+                             device=device, progress=progress)
     start = time.perf_counter()
-    garment_vertices = solver.run(posed.skinning_transforms)
+    garment_vertices = solver.run(posed)
     elapsed = time.perf_counter() - start
     rest = ClothRest.from_mesh(rest_vertices.double(), draped.faces, cloth)
     metrics = sequence_metrics(garment_vertices, rest, posed.vertices, the_body.faces,

@@ -1,0 +1,83 @@
+"""Module C: the HOOD-style teacher. The shared trunk on the dynamic body–garment graph, a
+decoder to per-vertex acceleration, and symplectic Euler (REFERENCE.md; paper Sec. 3.4).
+
+State units are per step: v is the displacement of the last step (m), a the change of it
+(m per step²). One step: v(t+1) = v(t) + a, x(t+1) = x(t) + v(t+1); pinned vertices are
+put where the body takes them.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from hyperbones.models.cloth_graph import EDGE_FEATURES, LENGTH_SCALE, NODE_FEATURES, ClothGraph
+from hyperbones.models.mgn import EdgeSet, MeshGraphNet, mlp
+from hyperbones.models.normalizer import Normalizer
+
+
+@dataclass(frozen=True)
+class TrunkConfig:
+    """Size of the shared MeshGraphNet trunk (paper: latent 128, 15 blocks)."""
+
+    latent: int = 128
+    blocks: int = 15
+
+
+class Teacher(nn.Module):
+    """Graph -> (V,3) garment accelerations in metres per step² (garment nodes only)."""
+
+    def __init__(self, config: TrunkConfig = TrunkConfig()):
+        super().__init__()
+        self.config = config
+        self.node_normalizer = Normalizer(NODE_FEATURES)
+        self.edge_normalizers = nn.ModuleDict({"mesh": Normalizer(EDGE_FEATURES), "world": Normalizer(EDGE_FEATURES)})
+        self.trunk = MeshGraphNet(NODE_FEATURES, {"mesh": EDGE_FEATURES, "world": EDGE_FEATURES},
+                                  latent=config.latent, num_blocks=config.blocks)
+        self.decoder = mlp(config.latent, 3, config.latent, layer_norm=False)
+        # Start near zero acceleration (the garment coasts) instead of random centimetre kicks.
+        with torch.no_grad():
+            self.decoder[-1].weight.mul_(0.01)
+            self.decoder[-1].bias.zero_()
+
+    def encode(self, graph: ClothGraph) -> torch.Tensor:
+        """(N,latent) node latents of the graph (what Module B reads on the canonical graph)."""
+        edge_sets = {name: EdgeSet(s.senders, s.receivers, self.edge_normalizers[name](s.features))
+                     for name, s in graph.edge_sets.items()}
+        return self.trunk(self.node_normalizer(graph.node_features), edge_sets)
+
+    def forward(self, graph: ClothGraph) -> torch.Tensor:
+        latents = self.encode(graph)[: graph.num_garment]
+        return self.decoder(latents) / LENGTH_SCALE
+
+
+def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: torch.Tensor,
+              pinned_mask: torch.Tensor, pinned_next: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Symplectic Euler in per-step units: (V,3) ×3, (V,) mask, (V,3) -> x(t+1), v(t+1).
+
+    Pinned vertices go to ``pinned_next`` and take the displacement that got them there.
+    """
+    velocities_next = velocities + acceleration
+    positions_next = positions + velocities_next
+    pinned = pinned_mask[:, None]
+    positions_next = torch.where(pinned, pinned_next, positions_next)
+    velocities_next = torch.where(pinned, pinned_next - positions, velocities_next)
+    return positions_next, velocities_next
+
+
+def teacher_step(model: nn.Module, topology, positions: torch.Tensor, velocities: torch.Tensor,
+                 pinned_next: torch.Tensor, body_now: torch.Tensor, body_next: torch.Tensor,
+                 body_faces: torch.Tensor, nearest, dt: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """One step t -> t+1 of the teacher: graph, accelerations, integration.
+
+    positions, velocities: (V,3) state at t (per-step displacement); pinned_next: (V,3);
+    body_now/body_next: (Vb,3); nearest: ``BodyProximity.query(positions)`` at t.
+    Returns x(t+1), v(t+1), both (V,3).
+    """
+    from hyperbones.models.cloth_graph import build_graph
+
+    graph = build_graph(topology, positions, velocities, pinned_next, body_now, body_next, body_faces, nearest, dt)
+    acceleration = model(graph)
+    return integrate(positions, velocities, acceleration, topology.pinned_mask, pinned_next)

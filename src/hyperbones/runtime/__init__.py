@@ -1,0 +1,1 @@
+"""Runtime tools: benchmarks (and, later, the per-frame simulator)."""

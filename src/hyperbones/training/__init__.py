@@ -1,0 +1,1 @@
+"""Training: typed configs, data sampling, losses, the trainer and its checkpoints."""

@@ -1,0 +1,48 @@
+"""Checkpoints: atomic writes, safe loads (``weights_only=True``), and the shipped teacher.
+
+A training checkpoint holds the model and optimiser states, the step, the episode RNG
+state and the config (as a plain dict). ``export_weights`` keeps what inference needs
+(model state + config + a training summary) for committing.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from hyperbones.errors import InputFileError
+from hyperbones.io_utils import atomic_path
+
+SHIPPED_TEACHER = Path(__file__).resolve().parent.parent / "checkpoints" / "teacher.pt"
+"""The committed teacher (``hyperbones simulate --method teacher`` loads it by default)."""
+
+
+def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save(payload, tmp)
+    return path
+
+
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
+    """Load a checkpoint without executing pickled code; one-line errors name the file."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(path, "checkpoint not found")
+    try:
+        payload = torch.load(path, map_location=map_location, weights_only=True)
+    except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
+        raise InputFileError(path, f"not a hyperbones checkpoint ({type(error).__name__}: {str(error).splitlines()[0]})") from None
+    if not isinstance(payload, dict) or "model" not in payload or "config" not in payload:
+        raise InputFileError(path, "not a hyperbones checkpoint (no model state or config)")
+    return payload
+
+
+def export_weights(checkpoint: str | Path, out: str | Path, summary: dict[str, Any] | None = None) -> Path:
+    """Write the inference part of a training checkpoint (model, config, step, summary) to ``out``."""
+    payload = load_checkpoint(checkpoint)
+    slim = {"model": payload["model"], "config": payload["config"], "step": payload["step"],
+            "summary": summary or payload.get("summary", {})}
+    return save_checkpoint(out, slim)

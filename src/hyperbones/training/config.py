@@ -1,0 +1,133 @@
+"""The typed training configuration, read from a TOML file and saved into every checkpoint.
+
+A config file has three tables, ``[model]``, ``[data]`` and ``[train]``, with the fields of
+``TrunkConfig``, ``DataConfig`` and ``TrainConfig``; anything left out takes the default
+below. Unknown keys and wrongly typed values are errors that name the file.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from typing import Any, get_args, get_origin, get_type_hints
+
+from hyperbones.errors import InputFileError
+from hyperbones.models.teacher import TrunkConfig
+
+TEMPLATE_NAMES = ("tshirt", "tshirt-open", "pants", "long-skirt", "dress", "tight-dress")
+
+
+@dataclass(frozen=True)
+class DataConfig:
+    """What the teacher trains on, and what is held out for evaluation.
+
+    templates / resolutions: garments (made on the default body, carried to each sampled
+        body along its surface) at these vertex counts.
+    train_clips / test_clips: CMU clip names under ``mocap_dir``; test clips are never
+        sampled. builtins: built-in motions also trained on.
+    test_bodies: held-out shapes ("k=v,..."); sampled bodies stay at least
+        ``test_body_margin`` (L2 over the six phenotype values) away from each.
+    hold_seconds: stillness appended to every training clip, so settling is learnt.
+    default_material_fraction: share of episodes with HOOD's default fabric; the others
+        draw μ, λ, k_b, ρ over HOOD's ranges.
+    start_noise: std (m) of the noise added to the LBS start; settle_dt: length (s) of the
+        first step of an episode, taken with the body held still.
+    """
+
+    templates: tuple[str, ...] = TEMPLATE_NAMES
+    resolutions: tuple[int, ...] = (1500, 2500)
+    mocap_dir: str = "../shared/data/mocap/cmu"
+    train_clips: tuple[str, ...] = ("01_01", "02_01", "02_03", "05_06", "111_10", "16_07", "16_27", "69_53", "74_06")
+    test_clips: tuple[str, ...] = ("16_21", "16_35", "143_06")
+    source_fps: dict[str, float] = field(default_factory=lambda: {"74_06": 60.0})
+    builtins: tuple[str, ...] = ("walk", "run", "jump", "turn", "idle", "arm-swing", "sit")
+    test_bodies: tuple[str, ...] = ("gender=0.3,age=0.6,muscle=0.7,weight=0.3,height=0.6,proportions=0.4",
+                                    "gender=0.8,age=0.4,muscle=0.3,weight=0.8,height=0.3,proportions=0.6")
+    test_body_margin: float = 0.25
+    hold_seconds: float = 1.5
+    default_material_fraction: float = 0.5
+    start_noise: float = 0.001
+    settle_dt: float = 1.0 / 3.0
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Optimisation (HOOD's: Adam 5e-5, grad-norm clip 1, collision weight ramp, rollouts 1 → 5)."""
+
+    steps: int = 100_000
+    learning_rate: float = 5e-5
+    grad_clip: float = 1.0
+    collision_weight_start: float = 5e3
+    collision_weight_end: float = 5e5
+    collision_ramp_steps: int = 50_000
+    rollout_start: int = 1
+    rollout_max: int = 5
+    rollout_ramp_steps: int = 20_000
+    checkpoint_every: int = 250
+    log_every: int = 10
+    seed: int = 0
+    device: str = "auto"
+
+
+@dataclass(frozen=True)
+class TeacherTrainingConfig:
+    model: TrunkConfig = TrunkConfig()
+    data: DataConfig = DataConfig()
+    train: TrainConfig = TrainConfig()
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any], source: str = "config") -> "TeacherTrainingConfig":
+        sections = {f.name: f.type for f in fields(cls)}
+        hints = get_type_hints(cls)
+        unknown = set(values) - set(sections)
+        if unknown:
+            raise InputFileError(source, f"unknown section(s) {sorted(unknown)}; expected {sorted(sections)}")
+        built = {name: _build(hints[name], values.get(name, {}), f"{source} [{name}]") for name in sections}
+        return cls(**built)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "TeacherTrainingConfig":
+        path = Path(path)
+        if not path.exists():
+            raise InputFileError(path, "config file not found")
+        try:
+            values = tomllib.loads(path.read_text())
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+            raise InputFileError(path, f"not valid TOML ({error})") from None
+        return cls.from_dict(values, str(path))
+
+
+def _build(kind, values: Any, where: str):
+    if not isinstance(values, dict):
+        raise InputFileError(where.split(" [")[0], f"{where} must be a table")
+    hints = get_type_hints(kind)
+    unknown = set(values) - set(hints)
+    if unknown:
+        raise InputFileError(where.split(" [")[0], f"{where}: unknown key(s) {sorted(unknown)}; known: {sorted(hints)}")
+    return kind(**{key: _coerce(hints[key], value, f"{where}.{key}") for key, value in values.items()})
+
+
+def _coerce(kind, value: Any, where: str):
+    origin = get_origin(kind)
+    file = where.split(" [")[0]
+    if origin is tuple:
+        item = get_args(kind)[0]
+        if not isinstance(value, (list, tuple)):
+            raise InputFileError(file, f"{where} must be a list")
+        return tuple(_coerce(item, v, where) for v in value)
+    if origin is dict:
+        if not isinstance(value, dict):
+            raise InputFileError(file, f"{where} must be a table")
+        key_kind, value_kind = get_args(kind)
+        return {str(k): _coerce(value_kind, v, where) for k, v in value.items()}
+    if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return float(value)
+    if kind is int and isinstance(value, int) and not isinstance(value, bool):
+        return value
+    if kind is str and isinstance(value, str):
+        return value
+    raise InputFileError(file, f"{where} must be {kind.__name__}, got {value!r}")

@@ -1,0 +1,203 @@
+"""Training episodes for the teacher: a random body, garment, fabric and motion window.
+
+Expensive parts are done once per process and reused by every episode:
+  - each (template, resolution) is made on the default body (cached on disk like draped
+    garments), with its LBS weights and a ``ShapeFollower`` that carries it to other shapes;
+  - each clip is retargeted to the default body once, with a blend-in from the A-pose and
+    a hold at the end.
+Per episode a new body shape takes ~20 ms; the garment is carried onto it (that carried
+garment is its rest shape) and the clip's root path is scaled by the leg-length ratio.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+from dataclasses import dataclass
+from pathlib import Path
+
+import torch
+
+from hyperbones.body.anny_body import Body, body_for
+from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
+from hyperbones.errors import InputFileError
+from hyperbones.garment.garment import Garment
+from hyperbones.garment.templates import make_template
+from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.geometry.diffusion import diffuse, diffusion_steps
+from hyperbones.geometry.proximity import BodyProximity, surface_points
+from hyperbones.io_utils import atomic_path
+from hyperbones.models.cloth_graph import GarmentTopology
+from hyperbones.motion.load import load_motion
+from hyperbones.motion.motion import Motion
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.material import Material, sample_material
+from hyperbones.simulate.garments import cache_dir
+from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
+from hyperbones.training.config import DataConfig
+
+TEMPLATE_CACHE_VERSION = 2
+
+
+@dataclass
+class ShapeFollower:
+    """Carries a garment made on one body to another body shape (same mesh topology).
+
+    Each garment vertex moves by the displacement of its nearest skin point between the
+    two bodies; that displacement field is then smoothed over the garment where the cloth
+    hangs away from the skin, so a skirt between the legs moves with both legs instead of
+    tearing (the same rule as the LBS weights). A plain nearest-point transfer folds such
+    cloth where its nearest point jumps from one leg to the other.
+    """
+
+    vertices: torch.Tensor  # (V,3) the garment on the source body
+    face: torch.Tensor  # (V,) nearest source face
+    barycentric: torch.Tensor  # (V,3)
+    source_points: torch.Tensor  # (V,3) nearest source skin points
+    edges: torch.Tensor  # (E,2)
+    rate: torch.Tensor  # (V,1) diffusion rate
+    steps: int
+
+    @classmethod
+    def bind(cls, garment: Garment, body: Body) -> "ShapeFollower":
+        proximity = BodyProximity(body.faces)
+        proximity.update(body.rest_vertices)
+        nearest = proximity.query(garment.vertices, max_distance=1.0)
+        edges = garment.edges()
+        edge_length = float((garment.vertices[edges[:, 0]] - garment.vertices[edges[:, 1]]).norm(dim=-1).mean())
+        rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)[:, None]
+        return cls(garment.vertices, nearest.face.clamp_min(0), nearest.barycentric, nearest.point, edges, rate,
+                   diffusion_steps(SMOOTHING_LENGTH, edge_length))
+
+    def place(self, body: Body) -> torch.Tensor:
+        """(V,3) the garment carried onto ``body``'s canonical pose."""
+        points = surface_points(body.rest_vertices, body.faces, self.face, self.barycentric)
+        return self.vertices + diffuse(points - self.source_points, self.edges, self.rate, self.steps)
+
+
+@dataclass
+class GarmentSource:
+    """A template made on the default body: the garment, its LBS weights (V,31), how it follows other shapes."""
+
+    garment: Garment
+    skin_weights: torch.Tensor
+    follower: ShapeFollower
+
+
+def template_source(name: str, vertices: int, default_body: Body) -> GarmentSource:
+    """Make (or load from the cache) a template on the default body, with its weights and follower."""
+    path = cache_dir() / "templates" / f"{name}-{vertices}-v{TEMPLATE_CACHE_VERSION}.pt"
+    if path.exists():
+        data = torch.load(path, weights_only=True)
+        garment = Garment(data["vertices"], data["faces"], data["uvs"], data["face_uvs"], data["pinned"], name=name)
+        weights = data["skin_weights"]
+    else:
+        garment = make_template(name, default_body, vertices)
+        weights = garment_skin_weights(garment, default_body)
+        with atomic_path(path) as tmp:
+            torch.save({"vertices": garment.vertices, "faces": garment.faces, "uvs": garment.uvs,
+                        "face_uvs": garment.face_uvs, "pinned": garment.pinned, "skin_weights": weights}, tmp)
+    return GarmentSource(garment, weights, ShapeFollower.bind(garment, default_body))
+
+
+@dataclass
+class Identity:
+    """One garment on one body with one fabric: what the physics and the graph need.
+
+    rest: the cloth's rest state (float32); topology: the graph's fixed part;
+    skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them).
+    """
+
+    name: str
+    body: Body
+    rest: ClothRest
+    topology: GarmentTopology
+    skin_weights: torch.Tensor
+
+    @classmethod
+    def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
+              skin_weights: torch.Tensor, material: Material) -> "Identity":
+        rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
+        topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
+        return cls(name, body, rest, topology, skin_weights)
+
+    def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
+        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
+        return linear_blend_skinning(self.rest.rest_vertices, self.skin_weights, skinning_transforms)
+
+
+@dataclass
+class Episode:
+    """A window of frames s−1 … s+K of a motion on one identity.
+
+    body_vertices: (K+2,Vb,3); garment_lbs: (K+2,V,3) the garment skinned along (its
+    pinned rows are where pinned vertices must be). Step k goes from frame k+1 to k+2.
+    """
+
+    identity: Identity
+    body_vertices: torch.Tensor
+    garment_lbs: torch.Tensor
+    motion: str
+
+    @property
+    def num_steps(self) -> int:
+        return self.body_vertices.shape[0] - 2
+
+
+class TeacherData:
+    """Samples episodes for training (``split="train"``) from the config's garments and motions."""
+
+    def __init__(self, config: DataConfig, seed: int = 0, progress=None):
+        self.config = config
+        self.random = random.Random(seed)
+        self.default_body = body_for(BodyShape())
+        self.sources = {}
+        for name in config.templates:
+            for vertices in config.resolutions:
+                if progress:
+                    progress(f"garment {name} ({vertices} vertices)")
+                self.sources[(name, vertices)] = template_source(name, vertices, self.default_body)
+        self.motions: list[Motion] = []
+        for clip in config.train_clips:
+            path = Path(config.mocap_dir) / f"{clip}.bvh"
+            if not path.exists():
+                raise InputFileError(path, "training clip not found (set data.mocap_dir in the config)")
+            if progress:
+                progress(f"motion {clip}")
+            self.motions.append(load_motion(str(path), self.default_body, hold=config.hold_seconds,
+                                            source_fps=config.source_fps.get(clip)))
+        for name in config.builtins:
+            self.motions.append(load_motion(name, self.default_body, hold=config.hold_seconds))
+        self.test_shapes = [BodyShape.parse(text) for text in config.test_bodies]
+
+    def sample_shape(self) -> BodyShape:
+        """A phenotype uniform over [0,1]^6, away from every held-out shape."""
+        while True:
+            values = {key: self.random.random() for key in PHENOTYPE_KEYS}
+            if all(math.dist(values.values(), test.as_dict().values()) >= self.config.test_body_margin
+                   for test in self.test_shapes):
+                return BodyShape(**values)
+
+    def sample_material(self) -> Material:
+        if self.random.random() < self.config.default_material_fraction:
+            return Material()
+        return sample_material(self.random.random)
+
+    def sample_identity(self) -> Identity:
+        name, vertices = self.random.choice(sorted(self.sources))
+        source = self.sources[(name, vertices)]
+        body = Body(self.sample_shape())
+        rest_vertices = source.follower.place(body)
+        return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
+                              source.skin_weights, self.sample_material())
+
+    def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
+        """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None)."""
+        identity = identity or self.sample_identity()
+        motion = self.random.choice(self.motions)
+        steps = min(steps, motion.num_frames - 2)
+        start = self.random.randrange(0, motion.num_frames - steps - 1)
+        window = motion.slice(start, start + steps + 2)
+        scale = identity.body.leg_length / self.default_body.leg_length
+        posed = identity.body.pose(window.joint_rotations, window.root_translation * scale)
+        return Episode(identity, posed.vertices, identity.skin(posed.skinning_transforms), motion.name)

@@ -1,0 +1,204 @@
+"""``hyperbones train``: self-supervised training of the teacher (Module C) with L_phys.
+
+Each optimiser step advances one episode by one simulation step, with the state detached
+between steps (HOOD): an episode starts from the LBS-posed garment plus noise, takes one
+long settling step with the body held still, then follows the motion for a rollout whose
+length grows from ``rollout_start`` to ``rollout_max`` steps over training.
+
+Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
+CPU, NCCL on CUDA); each rank samples its own episodes, rank 0 logs and checkpoints.
+"""
+
+from __future__ import annotations
+
+import os
+import random
+import time
+from pathlib import Path
+
+import torch
+import torch.distributed as dist
+from tqdm import tqdm
+
+from hyperbones.errors import ParameterError
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
+from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
+from hyperbones.training.config import TeacherTrainingConfig
+from hyperbones.training.data import Episode, TeacherData
+from hyperbones.training.loss import collision_weight_at, physics_terms
+
+QUERY_DISTANCE = 0.1  # m: nearest body faces are looked for this far out
+
+
+def pick_device(name: str) -> torch.device:
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ParameterError(f"device {name!r} asked for, but CUDA is not available")
+    return torch.device(name)
+
+
+def rollout_length(step: int, config) -> int:
+    if config.rollout_ramp_steps <= 0:
+        return config.rollout_max
+    fraction = min(1.0, step / config.rollout_ramp_steps)
+    return int(round(config.rollout_start + fraction * (config.rollout_max - config.rollout_start)))
+
+
+class TeacherTrainer:
+    """Owns the model, optimiser, data, logs and checkpoints of one run directory."""
+
+    def __init__(self, config: TeacherTrainingConfig, run_dir: str | Path, resume: bool = False,
+                 progress: bool = True, max_steps: int | None = None):
+        self.config = config
+        self.run_dir = Path(run_dir)
+        self.distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
+        self.device = pick_device(config.train.device)
+        if self.distributed and not dist.is_initialized():
+            local = int(os.environ.get("LOCAL_RANK", "0"))
+            if self.device.type == "cuda":
+                self.device = torch.device("cuda", local)
+                torch.cuda.set_device(self.device)
+            dist.init_process_group("nccl" if self.device.type == "cuda" else "gloo")
+        self.rank = dist.get_rank() if self.distributed else 0
+        self.is_main = self.rank == 0
+        self.progress = progress and self.is_main
+        self.max_steps = max_steps
+        torch.manual_seed(config.train.seed + self.rank)
+
+        self.model = Teacher(config.model).to(self.device)
+        self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.train.learning_rate)
+        self.step = 0
+        self.checkpoint_path = self.run_dir / "checkpoint.pt"
+        episode_seed = config.train.seed * 1000 + self.rank
+        if resume and self.checkpoint_path.exists():
+            payload = load_checkpoint(self.checkpoint_path, map_location=self.device)
+            if payload["config"] != config.as_dict():
+                raise ParameterError(f"{self.checkpoint_path}: --resume with a different config than the run's")
+            self.model.load_state_dict(payload["model"])
+            self.optimizer.load_state_dict(payload["optimizer"])
+            self.step = int(payload["step"])
+            episode_seed += 7919 * self.step
+        elif self.checkpoint_path.exists() and not resume:
+            raise ParameterError(f"{self.run_dir} already holds a run: pass --resume to continue it or use another --out")
+        self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
+        self.data = TeacherData(config.data, seed=episode_seed,
+                                progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
+        self.noise = random.Random(episode_seed + 1)
+        self.proximity = BodyProximity(self.data.default_body.faces, device=self.device)
+        self.body_faces = self.data.default_body.faces.to(self.device)
+        self.writer = None
+        if self.is_main:
+            from torch.utils.tensorboard import SummaryWriter
+
+            self.run_dir.mkdir(parents=True, exist_ok=True)
+            self.writer = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=self.step or None)
+        self._episode: Episode | None = None
+        self._k = 0
+        self._state = None
+
+    # -- one optimiser step -------------------------------------------------------------
+    def _advance(self) -> dict[str, float]:
+        """One simulation step of the current episode (a new episode when it has run out)."""
+        cfg = self.config
+        if self._episode is None or self._k >= self._episode.num_steps:
+            self._episode = self.data.sample_episode(rollout_length(self.step, cfg.train))
+            lbs = self._episode.garment_lbs[1].to(self.device)
+            noise = torch.randn_like(lbs) * cfg.data.start_noise
+            pinned = self._episode.identity.topology.pinned_mask.to(self.device)[:, None]
+            self._state = (torch.where(pinned, lbs, lbs + noise), torch.zeros_like(lbs))
+            self._k = -1  # the settling step first
+        episode = self._episode
+        identity = episode.identity
+        topology = identity.topology.to(self.device)
+        rest = identity.rest.to(self.device)
+        if self._k < 0:
+            frame_now = frame_next = 1
+            dt = cfg.data.settle_dt
+        else:
+            frame_now, frame_next = self._k + 1, self._k + 2
+            dt = 1.0 / 30.0
+        body_now = episode.body_vertices[frame_now].to(self.device)
+        body_next = episode.body_vertices[frame_next].to(self.device)
+        pinned_next = episode.garment_lbs[frame_next].to(self.device)
+        positions, velocities = self._state
+        self.proximity.update(body_now)
+        nearest = self.proximity.query(positions, max_distance=QUERY_DISTANCE)
+        positions_next, velocities_next = teacher_step(self.ddp, topology, positions, velocities, pinned_next,
+                                                       body_now, body_next, self.body_faces, nearest, dt)
+        weight = collision_weight_at(self.step, cfg.train.collision_weight_start, cfg.train.collision_weight_end,
+                                     cfg.train.collision_ramp_steps)
+        terms = physics_terms(positions_next, positions, velocities, rest, nearest, body_now, body_next,
+                              self.body_faces, weight, dt)
+        loss = sum(terms.values())
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
+        if torch.isfinite(grad_norm):
+            self.optimizer.step()  # every rank sees the same averaged gradient, so all skip together
+        if self._k < 0:
+            # After settling, the garment moves with the body's LBS velocity at the first frame.
+            velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)
+        self._state = (positions_next.detach(), velocities_next.detach())
+        self._k += 1
+        if not torch.isfinite(positions_next).all():
+            self._episode = None  # a blown-up episode is dropped; the loss already pushed against it
+        logs = {name: float(value.detach()) for name, value in terms.items()}
+        logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
+                    rollout=rollout_length(self.step, cfg.train), settle=float(self._k == 0))
+        return logs
+
+    # -- the loop -----------------------------------------------------------------------
+    def train(self) -> int:
+        total = self.config.train.steps if self.max_steps is None else min(self.config.train.steps, self.max_steps)
+        bar = tqdm(total=total, initial=self.step, desc="train teacher", disable=not self.progress, unit="step")
+        started, first_step = time.perf_counter(), self.step
+        running = {}
+        try:
+            while self.step < total:
+                logs = self._advance()
+                self.step += 1
+                for key, value in logs.items():
+                    running[key] = 0.9 * running.get(key, value) + 0.1 * value
+                if self.is_main and self.step % self.config.train.log_every == 0:
+                    for key, value in logs.items():
+                        self.writer.add_scalar(f"train/{key}", value, self.step)
+                    rate = (self.step - first_step) / max(time.perf_counter() - started, 1e-9)
+                    self.writer.add_scalar("train/steps_per_second", rate, self.step)
+                    bar.set_postfix(loss=f"{running['loss']:.3g}", strain=f"{running['stretching']:.3g}",
+                                    coll=f"{running['collision']:.2g}", refresh=False)
+                bar.update(1)
+                if self.step % self.config.train.checkpoint_every == 0 or self.step == total:
+                    self.save()
+        finally:
+            bar.close()
+            if self.writer:
+                self.writer.flush()
+        return self.step
+
+    def save(self) -> None:
+        if not self.is_main:
+            return
+        save_checkpoint(self.checkpoint_path, {
+            "model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(), "step": self.step,
+            "config": self.config.as_dict(),
+        })
+
+    def close(self) -> None:
+        if self.writer:
+            self.writer.close()
+        if self.distributed and dist.is_initialized():
+            dist.destroy_process_group()
+
+
+def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[Teacher, dict]:
+    """The teacher model (eval mode) and the checkpoint's payload."""
+    payload = load_checkpoint(path, map_location=device)
+    model = Teacher(TrunkConfig(**payload["config"]["model"])).to(device)
+    model.load_state_dict(payload["model"])
+    model.eval()
+    return model, payload
+
+
+__all__ = ["TeacherTrainer", "teacher_from_checkpoint", "rollout_length"]
