@@ -199,6 +199,19 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_check_teacher(args) -> int:
+    from hyperbones.simulate.stability import settling_table, stability_table
+
+    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
+    garments = split(args.garments)
+    common = dict(vertices=args.vertices, body=args.body, checkpoint=args.checkpoint, device=args.device,
+                  progress=not args.quiet)
+    print(stability_table(args.method, garments, split(args.motions), frames=args.frames, **common))
+    print()
+    print(settling_table(args.method, garments, args.settle_motion, hold=args.hold, **common))
+    return 0
+
+
 def _source_fps_pair(text: str):
     name, _, value = text.partition("=")
     try:
@@ -311,6 +324,24 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(func=cmd_bench)
+
+    check_teacher = sub.add_parser("check-teacher", help="tables of long-rollout stability and settling of a learnt method",
+                                   description="Rolls the method out for --frames frames on each motion (held still "
+                                               "after it ends) and reports NaN, top speed and kinetic energy; then "
+                                               "measures how the garment's kinetic energy decays after a clip stops.")
+    check_teacher.add_argument("--method", default="teacher", help="learnt method (default: teacher)")
+    check_teacher.add_argument("--checkpoint", default=None, help="checkpoint (default: the shipped one)")
+    check_teacher.add_argument("--garments", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
+                               help="comma list (default: the six templates)")
+    check_teacher.add_argument("--motions", default="walk", help="comma list of motions for the long rollouts")
+    check_teacher.add_argument("--frames", type=int, default=1000, help="rollout length (default 1000)")
+    check_teacher.add_argument("--settle-motion", default="walk", help="clip before the still hold (default: walk)")
+    check_teacher.add_argument("--hold", type=float, default=3.0, help="seconds of stillness after it (default 3)")
+    check_teacher.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
+    check_teacher.add_argument("--body", default=None, help=BODY_HELP)
+    check_teacher.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    check_teacher.add_argument("--quiet", action="store_true", help="no progress bars")
+    check_teacher.set_defaults(func=cmd_check_teacher)
 
     garment = sub.add_parser("garment", help="make the built-in garments")
     garment_sub = garment.add_subparsers(dest="garment_command", metavar="ACTION", required=True)

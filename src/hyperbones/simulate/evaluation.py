@@ -20,6 +20,17 @@ def body_signed_distances(garment_vertices: torch.Tensor, body_vertices: torch.T
     return torch.stack(distances)
 
 
+def vertex_speeds(garment_vertices: torch.Tensor, dt: float) -> torch.Tensor:
+    """(T,V,3) -> (T−1,V) speed of every vertex between consecutive frames, m/s."""
+    return (garment_vertices[1:] - garment_vertices[:-1]).norm(dim=-1) / dt
+
+
+def kinetic_energy(garment_vertices: torch.Tensor, masses: torch.Tensor, dt: float) -> torch.Tensor:
+    """(T,V,3), (V,) kg -> (T−1,) Σ ½ m v² per frame step, joules."""
+    velocities = (garment_vertices[1:] - garment_vertices[:-1]) / dt
+    return 0.5 * (masses.to(velocities) * velocities.square().sum(-1)).sum(-1)
+
+
 def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_vertices: torch.Tensor,
                      body_faces: torch.Tensor, origin: torch.Tensor, dt: float) -> dict[str, float]:
     """Every metric of REFERENCE.md for one sequence.
@@ -33,7 +44,8 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
     Returns:
         edge_error_pct, area_error_pct (GAPS), collision_pct (d < 0), collision_1mm_pct
         (HOOD: d < 1 mm), and the mean per-frame strain, bending, inertia, gravity (J,
-        HOOD protocol, frames t >= 2).
+        HOOD protocol, frames t >= 2); ``finite`` (no NaN/inf) and ``max_speed`` (m/s, the
+        fastest vertex over the sequence).
     """
     x = garment_vertices.double()
     distances = body_signed_distances(garment_vertices, body_vertices, body_faces)
@@ -42,6 +54,8 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         "area_error_pct": float(area_error_pct(x, rest)),
         "collision_pct": float(collision_pct(distances, 0.0)),
         "collision_1mm_pct": float(collision_pct(distances, HOOD_COLLISION_THRESHOLD)),
+        "finite": bool(torch.isfinite(x).all()),
+        "max_speed": float(vertex_speeds(x, dt).max()) if x.shape[0] > 1 else 0.0,
     }
     if x.shape[0] >= 3:
         energies = mean_energies(x - origin.double(), rest, dt=dt)

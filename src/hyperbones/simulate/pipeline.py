@@ -49,6 +49,7 @@ class SimulationResult:
     joint_positions: torch.Tensor   # (T,31,3)
     fps: float
     metrics: dict
+    vertex_masses: torch.Tensor | None = None  # (V,) kg, lumped from the rest shape
 
 
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
@@ -85,7 +86,7 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                     "garment_vertices": draped.num_vertices, "motion": the_motion.name, "body": shape.label(),
                     "fps": the_motion.fps})
     return SimulationResult(draped, garment_vertices, posed.vertices, the_body.faces,
-                            posed.joint_positions, the_motion.fps, metrics)
+                            posed.joint_positions, the_motion.fps, metrics, rest.vertex_masses.float())
 
 
 def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,
