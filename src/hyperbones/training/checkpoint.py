@@ -40,9 +40,31 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     return payload
 
 
-def export_weights(checkpoint: str | Path, out: str | Path, summary: dict[str, Any] | None = None) -> Path:
-    """Write the inference part of a training checkpoint (model, config, step, summary) to ``out``."""
+def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
+    """Write the inference part of a training checkpoint (model, config, step) to ``out``, and
+    beside it ``<out>.md``: the config and a summary of the run's TensorBoard log when the
+    checkpoint's folder has one."""
+    from hyperbones.training.summary import training_summary
+
     payload = load_checkpoint(checkpoint)
-    slim = {"model": payload["model"], "config": payload["config"], "step": payload["step"],
-            "summary": summary or payload.get("summary", {})}
-    return save_checkpoint(out, slim)
+    slim = {"model": payload["model"], "config": payload["config"], "step": payload["step"]}
+    out = save_checkpoint(out, slim)
+    log_dir = Path(checkpoint).parent / "tensorboard"
+    summary = training_summary(log_dir) if log_dir.exists() else "(no TensorBoard log beside the checkpoint)"
+    parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
+    with atomic_path(out.with_suffix(".md")) as tmp:
+        tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
+                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n"
+                       f"Training log (medians per stretch of steps):\n\n{summary}\n")
+    return out
+
+
+def _config_text(config: dict, prefix: str = "") -> str:
+    lines = []
+    for key, value in config.items():
+        if isinstance(value, dict) and prefix == "":
+            lines.append(f"[{key}]")
+            lines.append(_config_text(value, key).rstrip("\n"))
+        else:
+            lines.append(f"{key} = {value!r}")
+    return "\n".join(lines) + "\n"
