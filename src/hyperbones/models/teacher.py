@@ -67,17 +67,19 @@ def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: t
     return positions_next, velocities_next
 
 
-def teacher_step(model: nn.Module, topology, positions: torch.Tensor, velocities: torch.Tensor,
+def teacher_step(model: nn.Module, topology, rest, positions: torch.Tensor, velocities: torch.Tensor,
                  pinned_next: torch.Tensor, body_now: torch.Tensor, body_next: torch.Tensor,
                  body_faces: torch.Tensor, nearest, dt: float) -> tuple[torch.Tensor, torch.Tensor]:
     """One step t -> t+1 of the teacher: graph, accelerations, integration.
 
+    topology: ``GarmentTopology``; rest: the garment's ``ClothRest`` (for its internal forces);
     positions, velocities: (V,3) state at t (per-step displacement); pinned_next: (V,3);
     body_now/body_next: (Vb,3); nearest: ``BodyProximity.query(positions)`` at t.
     Returns x(t+1), v(t+1), both (V,3).
     """
-    from hyperbones.models.cloth_graph import build_graph
+    from hyperbones.models.cloth_graph import build_graph, internal_displacement
 
-    graph = build_graph(topology, positions, velocities, pinned_next, body_now, body_next, body_faces, nearest, dt)
+    graph = build_graph(topology, positions, velocities, pinned_next, body_now, body_next, body_faces, nearest, dt,
+                        internal_step=internal_displacement(positions, rest, dt))
     acceleration = model(graph)
     return integrate(positions, velocities, acceleration, topology.pinned_mask, pinned_next)

@@ -38,6 +38,7 @@ class TeacherMethod:
         self.settle_dt = float(payload["config"]["data"]["settle_dt"])
         material = material or garment.material
         rest = ClothRest.from_mesh(rest_vertices.float(), garment.faces, material)
+        self.rest = rest.to(self.device)
         self.topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
                                               material).to(self.device)
         self.canonical = garment.vertices
@@ -65,7 +66,7 @@ class TeacherMethod:
             body_now, body_next = body[now].to(self.device), body[nxt].to(self.device)
             proximity.update(body_now)
             nearest = proximity.query(positions, max_distance=QUERY_DISTANCE)
-            positions, velocities = teacher_step(self.model, self.topology, positions, velocities,
+            positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)
             if t == 0:

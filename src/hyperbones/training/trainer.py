@@ -125,7 +125,7 @@ class TeacherTrainer:
         positions, velocities = self._state
         self.proximity.update(body_now)
         nearest = self.proximity.query(positions, max_distance=QUERY_DISTANCE)
-        positions_next, velocities_next = teacher_step(self.ddp, topology, positions, velocities, pinned_next,
+        positions_next, velocities_next = teacher_step(self.ddp, topology, rest, positions, velocities, pinned_next,
                                                        body_now, body_next, self.body_faces, nearest, dt)
         weight = collision_weight_at(self.step, cfg.train.collision_weight_start, cfg.train.collision_weight_end,
                                      cfg.train.collision_ramp_steps)
