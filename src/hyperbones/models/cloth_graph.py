@@ -16,10 +16,10 @@ lengths, cm per frame for velocities, grams ×10 for masses):
 node (NODE_FEATURES = 21): velocity (3), unit normal (3), type one-hot free/pinned/body
     (3), prescribed displacement to t+1 (3; pinned and body nodes, zero for free ones),
     mass (1), material μ, λ, k_b, ρ in [0,1] over HOOD's ranges (4), step length dt/(1/30) (1),
-    and the cloth's internal force as a displacement over the step, −∇(E_stretch + E_bend)/m · dt²
-    (3; zero on body nodes). The last one is not in HOOD's list: it hands the network the
-    local physics it would otherwise have to learn from relative positions, and it made the
-    CPU-sized teacher learn much faster.
+    and the cloth's internal acceleration −∇(E_stretch + E_bend)/m in units of g, compressed
+    by asinh (3; zero on body nodes: a stretched stiff cloth reaches thousands of g). The
+    last one is not in HOOD's list: it hands the network the local physics it would
+    otherwise have to learn from relative positions.
 mesh edge (EDGE_FEATURES = 8), both directions: x_s − x_r and its length, now and at rest.
 world edge (8): x_garment(t) − body(t) and its length, x_garment(t) − body(t+1) and its length.
 """
@@ -32,6 +32,7 @@ import torch
 
 from hyperbones.geometry.proximity import Nearest
 from hyperbones.models.mgn import EdgeSet
+from hyperbones.physics.energies import GRAVITY, bending_energy, stretching_energy
 from hyperbones.physics.material import Material, material_features
 
 NODE_FEATURES = 21
@@ -89,16 +90,14 @@ def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
     return normals / normals.norm(dim=-1, keepdim=True).clamp_min(1e-12)
 
 
-def internal_displacement(positions: torch.Tensor, rest, dt: float) -> torch.Tensor:
-    """(V,3) −∇(E_stretch + E_bend)/m · dt²: where the cloth's own forces alone would move each
-    vertex over a step of ``dt`` from rest (no gradient flows through it). rest: ``ClothRest``."""
-    from hyperbones.physics.energies import bending_energy, stretching_energy
-
+def internal_acceleration(positions: torch.Tensor, rest) -> torch.Tensor:
+    """(V,3) −∇(E_stretch + E_bend)/m, m/s²: the acceleration the cloth's own forces give each
+    vertex at ``positions`` (no gradient flows through it). rest: ``ClothRest``."""
     with torch.enable_grad():
         x = positions.detach().requires_grad_(True)
         energy = stretching_energy(x, rest) + bending_energy(x, rest)
         (gradient,) = torch.autograd.grad(energy, x)
-    return -gradient / rest.vertex_masses.to(x).clamp_min(1e-12)[:, None] * dt * dt
+    return -gradient / rest.vertex_masses.to(x).clamp_min(1e-12)[:, None]
 
 
 @dataclass
@@ -112,7 +111,7 @@ class ClothGraph:
 
 def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: torch.Tensor,
                 pinned_next: torch.Tensor, body_now: torch.Tensor, body_next: torch.Tensor, body_faces: torch.Tensor,
-                nearest: Nearest, dt: float = FRAME_DT, internal_step: torch.Tensor | None = None,
+                nearest: Nearest, dt: float = FRAME_DT, internal_acceleration: torch.Tensor | None = None,
                 world_radius: float = WORLD_RADIUS) -> ClothGraph:
     """The graph of one step t -> t+1.
 
@@ -123,7 +122,7 @@ def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: 
         body_now, body_next: (Vb,3) body vertices at t and t+1; body_faces (Fb,3).
         nearest: ``BodyProximity.query(positions)`` against the body at t.
         dt: the step's length in seconds (the teacher's first, settling step is longer).
-        internal_step: (V,3) ``internal_displacement`` of the garment at t (zero when None).
+        internal_acceleration: (V,3) ``internal_acceleration`` of the garment at t, m/s² (zero when None).
     """
     device, num_garment = positions.device, topology.num_vertices
     near = nearest.found & (nearest.signed_distance.abs() < world_radius)
@@ -149,8 +148,8 @@ def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: 
         kinds,
         torch.cat([prescribed, body_step]) * LENGTH_SCALE,
         masses, material, step,
-        torch.cat([internal_step if internal_step is not None else torch.zeros_like(positions),
-                   torch.zeros(num_body, 3, device=device)]) * LENGTH_SCALE,
+        torch.asinh(torch.cat([internal_acceleration if internal_acceleration is not None
+                               else torch.zeros_like(positions), torch.zeros(num_body, 3, device=device)]) / GRAVITY),
     ], dim=-1)
 
     mesh_s, mesh_r = topology.mesh_senders, topology.mesh_receivers

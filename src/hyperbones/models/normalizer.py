@@ -10,12 +10,13 @@ class Normalizer(nn.Module):
     """(…,F) -> (…,F) standardised by a running mean and std.
 
     While training, each forward adds its batch to the statistics until
-    ``max_accumulations`` batches have been seen; after that (and in eval mode) they are
-    fixed. The statistics are buffers, so they are saved in checkpoints (and DDP keeps the
+    ``max_accumulations`` batches have been seen (MeshGraphNets keeps accumulating for most
+    of training: states seen late in training, such as long rollouts, differ from early
+    ones); after that, and in eval mode, they are fixed. The statistics are buffers, so they are saved in checkpoints (and DDP keeps the
     replicas equal by broadcasting them from rank 0).
     """
 
-    def __init__(self, size: int, max_accumulations: int = 1000, std_epsilon: float = 1e-2):
+    def __init__(self, size: int, max_accumulations: int = 100_000, std_epsilon: float = 1e-2):
         super().__init__()
         self.max_accumulations = max_accumulations
         self.std_epsilon = std_epsilon

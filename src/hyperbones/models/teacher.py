@@ -1,9 +1,11 @@
 """Module C: the HOOD-style teacher. The shared trunk on the dynamic body–garment graph, a
 decoder to per-vertex acceleration, and symplectic Euler (REFERENCE.md; paper Sec. 3.4).
 
-State units are per step: v is the displacement of the last step (m), a the change of it
-(m per step²). One step: v(t+1) = v(t) + a, x(t+1) = x(t) + v(t+1); pinned vertices are
-put where the body takes them.
+The decoder predicts a physical acceleration in units of g; a step of length dt turns it
+into a change of per-step displacement a = ĝ·g·dt², so the long settling step and the
+1/30 s steps share one output scale. State units are per step: v is the displacement of
+the last step (m). One step: v(t+1) = v(t) + a, x(t+1) = x(t) + v(t+1); pinned vertices
+are put where the body takes them.
 """
 
 from __future__ import annotations
@@ -13,7 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from hyperbones.models.cloth_graph import EDGE_FEATURES, LENGTH_SCALE, NODE_FEATURES, ClothGraph
+from hyperbones.models.cloth_graph import EDGE_FEATURES, NODE_FEATURES, ClothGraph
 from hyperbones.models.mgn import EdgeSet, MeshGraphNet, mlp
 from hyperbones.models.normalizer import Normalizer
 
@@ -27,7 +29,7 @@ class TrunkConfig:
 
 
 class Teacher(nn.Module):
-    """Graph -> (V,3) garment accelerations in metres per step² (garment nodes only)."""
+    """Graph -> (V,3) garment accelerations in units of g (garment nodes only)."""
 
     def __init__(self, config: TrunkConfig = TrunkConfig()):
         super().__init__()
@@ -50,7 +52,7 @@ class Teacher(nn.Module):
 
     def forward(self, graph: ClothGraph) -> torch.Tensor:
         latents = self.encode(graph)[: graph.num_garment]
-        return self.decoder(latents) / LENGTH_SCALE
+        return self.decoder(latents)
 
 
 def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: torch.Tensor,
@@ -77,9 +79,10 @@ def teacher_step(model: nn.Module, topology, rest, positions: torch.Tensor, velo
     body_now/body_next: (Vb,3); nearest: ``BodyProximity.query(positions)`` at t.
     Returns x(t+1), v(t+1), both (V,3).
     """
-    from hyperbones.models.cloth_graph import build_graph, internal_displacement
+    from hyperbones.models.cloth_graph import build_graph, internal_acceleration
+    from hyperbones.physics.energies import GRAVITY
 
     graph = build_graph(topology, positions, velocities, pinned_next, body_now, body_next, body_faces, nearest, dt,
-                        internal_step=internal_displacement(positions, rest, dt))
-    acceleration = model(graph)
-    return integrate(positions, velocities, acceleration, topology.pinned_mask, pinned_next)
+                        internal_acceleration=internal_acceleration(positions, rest))
+    change = model(graph) * (GRAVITY * dt * dt)
+    return integrate(positions, velocities, change, topology.pinned_mask, pinned_next)
