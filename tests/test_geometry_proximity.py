@@ -143,3 +143,16 @@ def test_collision_energy_from_a_query_penalises_points_inside(sphere, sphere_pr
     energy = collision_energy(points, origin, normal, weight=1.0)
     depth = 2e-3 - signed_distance(points, vertices, faces, nearest.face)[0]
     assert energy.item() == pytest.approx(depth.item() ** 3, rel=1e-9) and depth > 0.02
+
+
+def test_push_outside_moves_only_close_movable_points(sphere_proximity):
+    from hyperbones.geometry.proximity import push_outside
+
+    proximity = sphere_proximity
+    points = torch.tensor([[0.0, 0.0, 0.5], [0.0, 0.0, 1.0005], [0.0, 0.0, 1.5], [0.0, 0.5, 0.0]])
+    nearest = proximity.query(points, max_distance=1.0)
+    movable = torch.tensor([True, True, True, False])
+    pushed = push_outside(points, nearest, 2e-3, movable=movable)
+    after = proximity.query(pushed, max_distance=1.0).signed_distance
+    assert bool((after[:2] > 1.5e-3).all())  # inside, and 0.5 mm out: both at the margin now
+    assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable

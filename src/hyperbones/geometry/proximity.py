@@ -225,3 +225,13 @@ def signed_distance(
     origin, normal = face_planes(body_vertices, faces, face)
     distance = ((points - origin) * normal).sum(-1)
     return torch.where(face >= 0, distance, torch.full_like(distance, float("inf")))
+
+
+def push_outside(points: torch.Tensor, nearest: Nearest, margin: float, movable: torch.Tensor | None = None) -> torch.Tensor:
+    """Points (N,3) closer to the body than ``margin`` (or inside it) moved to ``margin`` outside
+    their nearest point along its face normal; ``movable`` (N,) bool limits which may move."""
+    close = nearest.found & (nearest.signed_distance < margin)
+    if movable is not None:
+        close = close & movable
+    moved = nearest.point + margin * nearest.normal
+    return torch.where(close[:, None], moved.to(points), points)

@@ -1,8 +1,8 @@
 """The teacher (Module C) as a simulation method: an autoregressive rollout over any length.
 
-Frame 0 is the draped garment skinned to the first pose, relaxed by one long settling
-step with the body held still (as every training episode starts); each later frame is
-one teacher step. Pinned vertices follow the body by LBS.
+Frame 0 is the draped garment skinned to the first pose (any cloth inside the body pushed
+out to the collision margin), relaxed by one long settling step with the body held still,
+as every training episode starts; each later frame is one teacher step. Pinned vertices follow the body by LBS.
 """
 
 from __future__ import annotations
@@ -16,10 +16,11 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT, GarmentTopology
 from hyperbones.models.teacher import teacher_step
 from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
 from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.training.checkpoint import SHIPPED_TEACHER
@@ -58,7 +59,10 @@ class TeacherMethod:
         skinned = linear_blend_skinning(self.canonical, self.skin_weights, posed.skinning_transforms)  # (T,V,3)
         body = posed.vertices
         proximity = BodyProximity(self.body_faces, device=self.device)
-        positions = skinned[0].to(self.device)
+        proximity.update(body[0].to(self.device))
+        start = skinned[0].to(self.device)
+        positions = push_outside(start, proximity.query(start, max_distance=QUERY_DISTANCE), COLLISION_EPSILON,
+                                 movable=~self.topology.pinned_mask)
         velocities = torch.zeros_like(positions)
         for t in range(body.shape[0]):
             # Frame 0: settle on the still body; frame t > 0: the step from t-1 to t.

@@ -1,7 +1,8 @@
 """``hyperbones train``: self-supervised training of the teacher (Module C) with L_phys.
 
 Each optimiser step advances one episode by one simulation step, with the state detached
-between steps (HOOD): an episode starts from the LBS-posed garment plus noise, takes one
+between steps (HOOD): an episode starts from the LBS-posed garment plus noise (cloth that
+LBS put inside the body pushed out to the collision margin), takes one
 long settling step with the body held still, then follows the motion for a rollout whose
 length grows from ``rollout_start`` to ``rollout_max`` steps over training.
 
@@ -21,11 +22,12 @@ import torch.distributed as dist
 from tqdm import tqdm
 
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
 from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
+from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.training.loss import collision_weight_at, physics_terms
 
 QUERY_DISTANCE = 0.1  # m: nearest body faces are looked for this far out
@@ -106,8 +108,14 @@ class TeacherTrainer:
             self._episode = self.data.sample_episode(rollout_length(self.step, cfg.train))
             lbs = self._episode.garment_lbs[1].to(self.device)
             noise = torch.randn_like(lbs) * cfg.data.start_noise
-            pinned = self._episode.identity.topology.pinned_mask.to(self.device)[:, None]
-            self._state = (torch.where(pinned, lbs, lbs + noise), torch.zeros_like(lbs))
+            pinned = self._episode.identity.topology.pinned_mask.to(self.device)
+            start = torch.where(pinned[:, None], lbs, lbs + noise)
+            # LBS pushes some cloth into the body; left there, the collision term's gradient
+            # (w up to 5e5, cubic in the depth) drowns every other term of the loss.
+            self.proximity.update(self._episode.body_vertices[1].to(self.device))
+            nearest = self.proximity.query(start, max_distance=QUERY_DISTANCE)
+            start = push_outside(start, nearest, COLLISION_EPSILON, movable=~pinned)
+            self._state = (start, torch.zeros_like(lbs))
             self._k = -1  # the settling step first
         episode = self._episode
         identity = episode.identity
