@@ -52,3 +52,13 @@ def test_missing_checkpoint_is_a_one_line_error(tmp_path, capsys):
     assert main(["simulate", "--method", "teacher", "--checkpoint", str(tmp_path / "none.pt"), "--garment", "tshirt",
                  "--vertices", "1000", "--frames", "2", "--out", str(tmp_path / "o"), "--no-preview", "--quiet"]) == 2
     assert "none.pt: checkpoint not found" in capsys.readouterr().err
+
+
+def test_without_a_shipped_teacher_the_error_says_what_to_do(tmp_path, capsys):
+    from hyperbones.training.checkpoint import SHIPPED_TEACHER
+
+    if SHIPPED_TEACHER.exists():
+        pytest.skip("a teacher checkpoint ships with the package")
+    assert main(["simulate", "--method", "teacher", "--garment", "tshirt", "--vertices", "1000", "--frames", "2",
+                 "--out", str(tmp_path / "o"), "--no-preview", "--quiet"]) == 2
+    assert "pass --checkpoint FILE" in capsys.readouterr().err

@@ -14,6 +14,7 @@ import torch
 from tqdm import tqdm
 
 from hyperbones.body.anny_body import Body, PosedBody
+from hyperbones.errors import ParameterError
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, push_outside
@@ -35,6 +36,9 @@ class TeacherMethod:
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor, material: Material | None = None,
                  checkpoint: str | Path | None = None, device: str = "auto", progress: bool = False):
         self.device = pick_device(device)
+        if checkpoint is None and not SHIPPED_TEACHER.exists():
+            raise ParameterError("no trained teacher ships with this version yet: train one with `hyperbones train` "
+                                 "and pass --checkpoint FILE")
         self.model, payload = teacher_from_checkpoint(checkpoint or SHIPPED_TEACHER, self.device)
         self.settle_dt = float(payload["config"]["data"]["settle_dt"])
         material = material or garment.material

@@ -1,7 +1,8 @@
 """Checkpoints: atomic writes, safe loads (``weights_only=True``), and the shipped teacher.
 
-A training checkpoint holds the model and optimiser states, the step, the episode RNG
-state and the config (as a plain dict). ``export_weights`` keeps what inference needs
+A training checkpoint holds the model and optimiser states, the step and the config (as
+a plain dict); a resumed run re-seeds its episode sampler from the step, so it does not
+replay the episodes it has already seen. ``export_weights`` keeps what inference needs
 (model state + config + a training summary) for committing.
 """
 

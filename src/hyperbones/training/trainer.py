@@ -13,7 +13,6 @@ CPU, NCCL on CUDA); each rank samples its own episodes, rank 0 logs and checkpoi
 from __future__ import annotations
 
 import os
-import random
 import time
 from pathlib import Path
 
@@ -87,7 +86,6 @@ class TeacherTrainer:
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
         self.data = TeacherData(config.data, seed=episode_seed,
                                 progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
-        self.noise = random.Random(episode_seed + 1)
         self.proximity = BodyProximity(self.data.default_body.faces, device=self.device)
         self.body_faces = self.data.default_body.faces.to(self.device)
         self.writer = None
