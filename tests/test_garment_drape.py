@@ -4,8 +4,12 @@ import torch
 
 from hyperbones.body import BodyShape, body_for
 from hyperbones.garment import make_template
-from hyperbones.garment.drape import drape, transfer
+from hyperbones.garment.drape import (COLLISION_MARGIN, DRAPE_COLLISION_WEIGHT, FORCE_TOLERANCE, _contact_planes,
+                                      drape, transfer)
 from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.energies import (GRAVITY, bending_energy, collision_energy, gravity_energy,
+                                         stretching_energy)
 
 
 def _signed_distances(garment, body):
@@ -25,14 +29,37 @@ def test_drape_settles_without_penetration(body):
     assert torch.equal(draped.vertices[garment.pinned], garment.vertices[garment.pinned])
 
 
+def test_drape_reaches_force_balance(body):
+    """Recomputed on the returned garment, 95 % of the free vertices carry an unbalanced force
+    (cloth + gravity + the skin's push) under FORCE_TOLERANCE times their own weight."""
+    garment = make_template("dress", body, 1500)
+    draped, report = drape(garment, body)
+    assert report.converged and report.force_ratio_p95 < FORCE_TOLERANCE
+    rest = ClothRest.from_mesh(report.rest_vertices.double(), garment.faces, garment.material)
+    proximity = BodyProximity(body.faces)
+    proximity.update(body.rest_vertices)
+    x = draped.vertices.double().requires_grad_(True)
+    planes = _contact_planes(x.detach(), proximity, body.rest_vertices.double(), body.faces)
+    energy = (stretching_energy(x, rest) + bending_energy(x, rest) + gravity_energy(x, rest)
+              + collision_energy(x, *planes, eps=COLLISION_MARGIN, weight=DRAPE_COLLISION_WEIGHT))
+    (gradient,) = torch.autograd.grad(energy, x)
+    free = torch.ones(len(x), dtype=torch.bool)
+    free[garment.pinned] = False
+    ratio = (gradient.norm(dim=-1) / (rest.vertex_masses * GRAVITY))[free]
+    assert float(torch.quantile(ratio, 0.95)) < FORCE_TOLERANCE
+    # Far from it before the drape: the test would notice a drape that did not move.
+    start = garment.vertices.double().requires_grad_(True)
+    (gradient,) = torch.autograd.grad(stretching_energy(start, rest) + bending_energy(start, rest)
+                                      + gravity_energy(start, rest), start)
+    assert float(torch.quantile((gradient.norm(dim=-1) / (rest.vertex_masses * GRAVITY))[free], 0.95)) > 0.5
+
+
 def test_transfer_to_another_shape_then_drape(body):
-    garment, _ = drape(make_template("tshirt", body, 1500), body, max_rounds=3)
+    garment, _ = drape(make_template("tshirt", body, 1500), body, max_iterations=10)
     heavy = body_for(BodyShape(weight=1.0, muscle=1.0))
     moved = transfer(garment, body, heavy)
     assert float(moved.vertices[:, 0].abs().max()) > float(garment.vertices[:, 0].abs().max())
-    from hyperbones.physics.cloth import ClothRest
-
     rest = ClothRest.from_mesh(garment.vertices.double(), garment.faces, garment.material)
-    draped, report = drape(moved, heavy, rest=rest, max_rounds=3)
+    draped, report = drape(moved, heavy, rest=rest, max_iterations=10)
     assert (_signed_distances(draped, heavy) >= 0).all()
     assert report.penetrating_after == 0

@@ -75,6 +75,19 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
     slim = export_weights(tmp_path / "run" / "checkpoint.pt", tmp_path / "teacher.pt")
     assert "optimizer" not in torch.load(slim, weights_only=True)
 
+    # A second stage starts from the first one's weights, at step 0 with a fresh optimiser.
+    stage_two = TeacherTrainingConfig.from_dict(
+        {**TINY, "train": {**TINY["train"], "init_from": str(tmp_path / "run" / "checkpoint.pt")}})
+    fine_tune = TeacherTrainer(stage_two, tmp_path / "stage-two", progress=False)
+    assert fine_tune.step == 0 and not fine_tune.optimizer.state
+    assert all(torch.equal(a, b) for a, b in zip(fine_tune.model.state_dict().values(),
+                                                 resumed.model.state_dict().values()))
+    fine_tune.close()
+    wider = TeacherTrainingConfig.from_dict({**TINY, "model": {"latent": 32, "blocks": 2},
+                                             "train": stage_two.as_dict()["train"]})
+    with pytest.raises(ParameterError, match="init_from has model"):
+        TeacherTrainer(wider, tmp_path / "stage-three", progress=False)
+
 
 def test_two_process_ddp_training(tmp_path, body):
     config = tmp_path / "tiny.toml"

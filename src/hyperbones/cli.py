@@ -129,8 +129,11 @@ def cmd_garment_make(args) -> int:
     note = "not draped"
     if not args.no_drape:
         garment, report = drape(garment, body)
-        note = (f"draped: edge error {report.edge_error_pct:.2f} %, penetrating vertices "
-                f"{report.penetrating_before} -> {report.penetrating_after}")
+        balance = "in force balance" if report.converged else "NOT in force balance"
+        note = (f"draped in {report.iterations} Newton iterations, {balance} (95 % of free vertices carry an "
+                f"unbalanced force under {report.force_ratio_p95:.3f} of their weight); edge error "
+                f"{report.edge_error_pct:.2f} %, penetrating vertices {report.penetrating_before} -> "
+                f"{report.penetrating_after}")
     path = write_obj_garment(args.out, garment) or args.out
     print(f"wrote {Path(path).resolve()} ({garment.num_vertices} vertices, {len(garment.faces)} triangles, "
           f"{len(garment.pinned)} pinned; {note})")
@@ -355,7 +358,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     check_drape = sub.add_parser("check-drape", help="table of drape quality over garments, resolutions and bodies")
     check_drape.add_argument("mhclo", nargs="*", help="MakeHuman .mhclo garments to include (every piece)")
-    check_drape.add_argument("--resolutions", default="2500,8000,25000", help="template vertex counts (comma list)")
+    check_drape.add_argument("--resolutions", default="2500,5000,10000", help="template vertex counts (comma list)")
     check_drape.add_argument("--bodies", default="gender=0,weight=0,height=0;gender=1,muscle=1,weight=1,height=1;"
                              "gender=1,weight=0,height=0,proportions=1", help="body shapes separated by ';'")
     check_drape.add_argument("--quiet", action="store_true", help="no progress bar")

@@ -9,6 +9,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
 from dataclasses import asdict
 from pathlib import Path
 
@@ -25,7 +26,7 @@ from hyperbones.garment.templates import DEFAULT_VERTICES, TEMPLATES, make_templ
 from hyperbones.io_utils import atomic_path
 from hyperbones.physics.material import Material
 
-CACHE_VERSION = 2
+CACHE_VERSION = 3
 
 
 def cache_dir() -> Path:
@@ -89,6 +90,10 @@ def draped_garment(source: str, body: Body, *, vertices: int | None = None, piec
 
     rest = None if rest_vertices is None else ClothRest.from_mesh(rest_vertices.double(), undraped.faces, material)
     garment, report = drape(undraped, body, rest=rest)
+    if not report.converged:
+        warnings.warn(f"the drape of {undraped.name} stopped after {report.iterations} Newton iterations short of force "
+                      f"balance (95th percentile of unbalanced force / weight {report.force_ratio_p95:.3f}); "
+                      "it starts from there", stacklevel=2)
     if rest_vertices is None:
         rest_vertices = report.rest_vertices
     if use_cache:

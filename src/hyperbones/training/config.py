@@ -53,7 +53,12 @@ class DataConfig:
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Optimisation (HOOD's: Adam 5e-5, grad-norm clip 1, collision weight ramp, rollouts 1 → 5)."""
+    """Optimisation (HOOD's: Adam 5e-5, grad-norm clip 1, collision weight ramp, rollouts 1 → 5).
+
+    init_from: a training checkpoint (path relative to the folder the command runs in) whose
+        model weights and input statistics a new run starts from, with a fresh optimiser and
+        step 0; its model section must match this config's. Empty: random initialisation.
+    """
 
     steps: int = 100_000
     learning_rate: float = 5e-5
@@ -68,6 +73,7 @@ class TrainConfig:
     log_every: int = 10
     seed: int = 0
     device: str = "auto"
+    init_from: str = ""
 
 
 @dataclass(frozen=True)

@@ -75,7 +75,7 @@ class TeacherTrainer:
         episode_seed = config.train.seed * 1000 + self.rank
         if resume and self.checkpoint_path.exists():
             payload = load_checkpoint(self.checkpoint_path, map_location=self.device)
-            if payload["config"] != config.as_dict():
+            if TeacherTrainingConfig.from_dict(payload["config"], str(self.checkpoint_path)).as_dict() != config.as_dict():
                 raise ParameterError(f"{self.checkpoint_path}: --resume with a different config than the run's")
             self.model.load_state_dict(payload["model"])
             self.optimizer.load_state_dict(payload["optimizer"])
@@ -83,6 +83,8 @@ class TeacherTrainer:
             episode_seed += 7919 * self.step
         elif self.checkpoint_path.exists() and not resume:
             raise ParameterError(f"{self.run_dir} already holds a run: pass --resume to continue it or use another --out")
+        elif config.train.init_from:
+            self._initialise_from(Path(config.train.init_from))
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
         self.data = TeacherData(config.data, seed=episode_seed,
                                 progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
@@ -97,6 +99,14 @@ class TeacherTrainer:
         self._episode: Episode | None = None
         self._k = 0
         self._state = None
+
+    def _initialise_from(self, path: Path) -> None:
+        """Model weights and input statistics of another run's checkpoint (a fine-tuning start)."""
+        payload = load_checkpoint(path, map_location=self.device)
+        if payload["config"]["model"] != self.config.as_dict()["model"]:
+            raise ParameterError(f"{path}: train.init_from has model {payload['config']['model']}, "
+                                 f"this config {self.config.as_dict()['model']}")
+        self.model.load_state_dict(payload["model"])
 
     # -- one optimiser step -------------------------------------------------------------
     def _advance(self) -> dict[str, float]:
