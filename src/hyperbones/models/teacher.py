@@ -69,6 +69,21 @@ def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: t
     return positions_next, velocities_next
 
 
+def resolve_contact(positions: torch.Tensor, velocities: torch.Tensor, nearest, movable: torch.Tensor,
+                    margin: float) -> tuple[torch.Tensor, torch.Tensor]:
+    """Hard contact after a step: (V,3) ×2, ``BodyProximity.query(positions)`` on the body at
+    the same time, (V,) bool -> positions and velocities.
+
+    Movable vertices inside the body go to ``margin`` outside their nearest skin point, and
+    their velocity (per-step displacement) takes the push, as in position-based dynamics:
+    cloth that a limb reached moves on with the limb instead of carrying the penetration
+    into the next step, where the one-sided collision term may push it out on the wrong side.
+    """
+    inside = nearest.found & (nearest.signed_distance < 0) & movable
+    pushed = torch.where(inside[:, None], (nearest.point + margin * nearest.normal).to(positions), positions)
+    return pushed, velocities + (pushed - positions)
+
+
 def teacher_step(model: nn.Module, topology, rest, positions: torch.Tensor, velocities: torch.Tensor,
                  pinned_next: torch.Tensor, body_now: torch.Tensor, body_next: torch.Tensor,
                  body_faces: torch.Tensor, nearest, dt: float) -> tuple[torch.Tensor, torch.Tensor]:

@@ -19,7 +19,7 @@ from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT, GarmentTopology
-from hyperbones.models.teacher import teacher_step
+from hyperbones.models.teacher import resolve_contact, teacher_step
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
@@ -77,6 +77,10 @@ class TeacherMethod:
             positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)
+            proximity.update(body_next)
+            positions, velocities = resolve_contact(positions, velocities,
+                                                    proximity.query(positions, max_distance=QUERY_DISTANCE),
+                                                    ~self.topology.pinned_mask, COLLISION_EPSILON)
             if t == 0:
                 velocities = torch.zeros_like(velocities)  # the first pose is held still before it
             yield positions

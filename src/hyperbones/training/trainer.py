@@ -4,7 +4,9 @@ Each optimiser step advances one episode by one simulation step, with the state 
 between steps (HOOD): an episode starts from the LBS-posed garment plus noise (cloth that
 LBS put inside the body pushed out to the collision margin), takes one
 long settling step with the body held still, then follows the motion for a rollout whose
-length grows from ``rollout_start`` to ``rollout_max`` steps over training.
+length grows from ``rollout_start`` to ``rollout_max`` steps over training. The loss is
+taken on each raw prediction; the state carried to the next step then gets the same hard
+contact as the runtime (``resolve_contact``), so training sees the states inference does.
 
 Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
 CPU, NCCL on CUDA); each rank samples its own episodes, rank 0 logs and checkpoints.
@@ -22,7 +24,7 @@ from tqdm import tqdm
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity, push_outside
-from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
+from hyperbones.models.teacher import Teacher, TrunkConfig, resolve_contact, teacher_step
 from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
@@ -153,12 +155,19 @@ class TeacherTrainer:
         grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
         if torch.isfinite(grad_norm):
             self.optimizer.step()  # every rank sees the same averaged gradient, so all skip together
-        if self._k < 0:
-            # After settling, the garment moves with the body's LBS velocity at the first frame.
-            velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)
-        self._state = (positions_next.detach(), velocities_next.detach())
         self._k += 1
-        if not torch.isfinite(positions_next).all():
+        if torch.isfinite(positions_next).all():
+            # The loss saw the raw prediction; the state carried on gets the runtime's hard contact.
+            positions_next, velocities_next = positions_next.detach(), velocities_next.detach()
+            self.proximity.update(body_next)
+            positions_next, velocities_next = resolve_contact(
+                positions_next, velocities_next, self.proximity.query(positions_next, max_distance=QUERY_DISTANCE),
+                ~identity.topology.pinned_mask.to(self.device), COLLISION_EPSILON)
+            if self._k == 0:
+                # After settling, the garment moves with the body's LBS velocity at the first frame.
+                velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)
+            self._state = (positions_next, velocities_next)
+        else:
             self._episode = None  # a blown-up episode is dropped; the loss already pushed against it
         logs = {name: float(value.detach()) for name, value in terms.items()}
         logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
