@@ -9,7 +9,10 @@ taken on each raw prediction; the state carried to the next step then gets the s
 contact as the runtime (``resolve_contact``), so training sees the states inference does.
 
 Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
-CPU, NCCL on CUDA); each rank samples its own episodes, rank 0 logs and checkpoints.
+CPU, NCCL on CUDA with one GPU per process, gloo when processes share GPUs); each rank
+samples its own episodes, rank 0 logs and checkpoints. One garment graph is too small to
+fill a GPU, so several processes may share one (``torchrun --nproc_per_node 8`` on one
+GPU: eight episodes per optimiser step).
 """
 
 from __future__ import annotations
@@ -59,11 +62,7 @@ class TeacherTrainer:
         self.distributed = int(os.environ.get("WORLD_SIZE", "1")) > 1
         self.device = pick_device(config.train.device)
         if self.distributed and not dist.is_initialized():
-            local = int(os.environ.get("LOCAL_RANK", "0"))
-            if self.device.type == "cuda":
-                self.device = torch.device("cuda", local)
-                torch.cuda.set_device(self.device)
-            dist.init_process_group("nccl" if self.device.type == "cuda" else "gloo")
+            dist.init_process_group(self._join_device())
         self.rank = dist.get_rank() if self.distributed else 0
         self.is_main = self.rank == 0
         self.progress = progress and self.is_main
@@ -101,6 +100,18 @@ class TeacherTrainer:
         self._episode: Episode | None = None
         self._k = 0
         self._state = None
+
+    def _join_device(self) -> str:
+        """This rank's device and the process-group backend: NCCL with one GPU per process;
+        gloo on CPU, and when there are more processes than GPUs (several ranks then share
+        a GPU, each with its own episodes: NCCL allows one rank per GPU)."""
+        if self.device.type != "cuda":
+            return "gloo"
+        local, world = int(os.environ.get("LOCAL_RANK", "0")), int(os.environ.get("WORLD_SIZE", "1"))
+        gpus = torch.cuda.device_count()
+        self.device = torch.device("cuda", local % gpus)
+        torch.cuda.set_device(self.device)
+        return "nccl" if world <= gpus else "gloo"
 
     def _initialise_from(self, path: Path) -> None:
         """Model weights and input statistics of another run's checkpoint (a fine-tuning start)."""
