@@ -13,8 +13,8 @@ The drape looks for a local minimum of stretching + bending + gravity + body col
 - Newton step: the Hessian of every triangle (stretching) and hinge (bending) by autograd,
   with its eigenvalues replaced by their absolute values (so every step descends, and a
   buckling element keeps its curvature's size rather than none), summed into a sparse
-  matrix and factorised by sparse LU in a nested-dissection order found once. The collision penalty w·max(ε − d, 0)³
-  stiffens within micrometres, so a single linearisation lets vertices that reach the
+  matrix and factorised by sparse LU in a nested-dissection order found once
+  (``physics.sparse_hessian``). The collision penalty w·max(ε − d, 0)³ stiffens within micrometres, so a single linearisation lets vertices that reach the
   skin overshoot deep into it: the step minimises the quadratic cloth model plus the
   exact penalty along each vertex's frozen contact normal, with a second inner iteration
   (conjugate gradients preconditioned by the same factors) when the contact set changed.
@@ -22,12 +22,21 @@ The drape looks for a local minimum of stretching + bending + gravity + body col
   step is halved until the energy decreases, or doubled while it keeps decreasing. A
   vertex whose step would carry it across a crease of the skin (its nearest skin point
   jumping to a surface facing the other way: the distance has a kink there that no step
-  along one side's gradient descends) is held in place for that iteration.
-- Stop: in force balance, when the 95th percentile over free vertices of |∇E_i| / (m_i g)
-  is below ``force_tolerance``: 95 % of the vertices carry an out-of-balance force under
-  that fraction of their own weight. The collision term is part of E, so a vertex resting
-  on the skin counts as balanced when the skin's push carries it. Otherwise it stops after
-  ``max_iterations`` (the report says ``converged=False``).
+  along one side's gradient descends) is held in place for that iteration. When no step
+  decreases the energy, the Hessian is damped (Levenberg-Marquardt, ×100 at a time) and
+  the step solved again.
+- Stop, at rest, when either holds:
+  - force balance: the 95th percentile over free vertices of |∇E_i| / (m_i g) is below
+    ``force_tolerance`` (95 % of the vertices carry an out-of-balance force under that
+    fraction of their own weight; the collision term is part of E, so a vertex resting on
+    the skin counts as balanced when the skin's push carries it);
+  - the Newton step moves no vertex farther than ``step_tolerance`` (IPC's stopping rule:
+    the configuration is that close to the minimum of its local model). Cloth that
+    buckles under gravity (compressed StVK and bending are non-convex) can sit at such a
+    point with stiff in-plane forces off balance by a fraction of a vertex's weight, and
+    an energy that no longer changes in its sixth decimal.
+  Otherwise it stops after ``max_iterations``, or when even the most damped step finds no
+  decrease (the report says ``converged=False``).
 
 A last projection moves any vertex still closer to the skin than half the margin to the
 margin (resting vertices sit micrometres inside the margin, so normally none moves and the
@@ -53,15 +62,19 @@ from hyperbones.physics.sparse_hessian import SparseHessian, element_hessians
 
 COLLISION_MARGIN = 2e-3  # ε of the collision energy (REFERENCE.md)
 DRAPE_COLLISION_WEIGHT = 5e5  # HOOD's final weight: at rest nothing may pass through
-FORCE_TOLERANCE = 0.1  # stop once p95 over free vertices of |∇E_i| / (m_i g) is below this
+FORCE_TOLERANCE = 0.1  # stop once p95 over free vertices of |∇E_i| / (m_i g) is below this,
+STEP_TOLERANCE = 1e-4  # m: or once the Newton step moves no vertex farther than this (IPC's rule)
 CONTACT_RANGE = 0.1  # m: vertices farther from the skin feel no collision
+MIN_DAMPING, MAX_DAMPING = 1e-6, 1e2  # Levenberg-Marquardt damping, relative to the Hessian's diagonal
 
 
 @dataclass
 class DrapeReport:
     """What the drape did: energies (J) before/after, errors (%) against the rest shape, and
-    the force balance of the result: |∇E_i| / (m_i g) over free vertices, 95th percentile
-    and maximum (``converged``: the percentile is below the tolerance)."""
+    how close to rest it is: the force balance |∇E_i| / (m_i g) over free vertices (95th
+    percentile and maximum) and the longest vertex move (m) of the Newton step solved at
+    the returned state (NaN when force balance ended the drape before one was solved);
+    ``converged``: either is below its tolerance."""
 
     energy_before: float
     energy_after: float
@@ -72,6 +85,7 @@ class DrapeReport:
     iterations: int  # Newton iterations
     force_ratio_p95: float
     force_ratio_max: float
+    newton_step_max: float
     converged: bool
     rest_vertices: torch.Tensor | None = None  # (V,3) the rest shape used, when drape chose it
 
@@ -102,7 +116,7 @@ def _contact_planes(points: torch.Tensor, proximity: BodyProximity, body_vertice
 
 
 def drape(garment: Garment, body: Body, max_iterations: int = 100, force_tolerance: float = FORCE_TOLERANCE,
-          rest: ClothRest | None = None) -> tuple[Garment, DrapeReport]:
+          step_tolerance: float = STEP_TOLERANCE, rest: ClothRest | None = None) -> tuple[Garment, DrapeReport]:
     """Settle ``garment`` on ``body``'s canonical A-pose (see the module docstring).
 
     Args:
@@ -111,7 +125,8 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
             original pattern).
         max_iterations: Newton iterations at most.
         force_tolerance: stop once the 95th percentile over free vertices of |∇E_i| / (m_i g)
-            is below this.
+            is below this;
+        step_tolerance: or once the Newton step moves no vertex farther than this (m).
 
     Returns:
         The draped garment (same topology, UVs, pins) and a report.
@@ -145,7 +160,7 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
 
     planes = planes_for(x)
     energy_before = total_energy(x, planes)
-    iterations = 0
+    iterations, newton_step_max = 0, float("inf")
     while True:
         positions = x.clone().requires_grad_(True)
         (cloth_gradient,) = torch.autograd.grad(cloth_energy(positions), positions)
@@ -157,15 +172,26 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
         ratio = (gradient.norm(dim=-1) / weight)[free]
         ratio_p95, ratio_max = (float(torch.quantile(ratio, 0.95)), float(ratio.max())) if len(ratio) else (0.0, 0.0)
         if ratio_p95 < force_tolerance or iterations >= max_iterations:
+            newton_step_max = float("nan")  # no step solved at the returned state
             break
+        cloth_hessian = hessian.matrix([element_hessians(x, elements, energy) for elements, energy in element_energies])
+        held, damping = torch.zeros(len(x), dtype=torch.bool), MIN_DAMPING
+        step = _newton_step(x, cloth_gradient, distance, normal, in_range, hessian, cloth_hessian, held, damping)
+        newton_step_max = float(step.norm(dim=-1).max())
+        if newton_step_max < step_tolerance:
+            break  # within step_tolerance of the minimum of the local model: at rest
         iterations += 1
-        held = torch.zeros(len(x), dtype=torch.bool)
-        for _ in range(2):
-            step = _newton_step(x, cloth_gradient, distance, normal, in_range, hessian, element_energies, held)
+        while True:
             moved, moved_planes, crossing = _line_search(x, planes, step, gradient, total_energy, planes_for)
-            if moved is not None or not crossing.any():
+            if moved is not None:
                 break
-            held |= crossing  # solve again with the vertices at a crease held in place
+            if crossing.any() and not held[crossing].all():
+                held |= crossing  # solve again with the vertices at a crease held in place
+            elif damping < MAX_DAMPING:
+                damping *= 100  # Levenberg-Marquardt: a shorter step, closer to preconditioned descent
+            else:
+                break
+            step = _newton_step(x, cloth_gradient, distance, normal, in_range, hessian, cloth_hessian, held, damping)
         if moved is None:  # no step decreases the energy: as settled as this solver gets
             break
         x, planes = moved, moved_planes
@@ -175,19 +201,21 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
         edge_error_pct=float(edge_error_pct(x_final[None].double(), rest)),
         area_error_pct=float(area_error_pct(x_final[None].double(), rest)),
         penetrating_before=penetrating_before, penetrating_after=penetrating_after, iterations=iterations,
-        force_ratio_p95=ratio_p95, force_ratio_max=ratio_max, converged=ratio_p95 < force_tolerance,
+        force_ratio_p95=ratio_p95, force_ratio_max=ratio_max, newton_step_max=newton_step_max,
+        converged=bool(ratio_p95 < force_tolerance or newton_step_max < step_tolerance),
         rest_vertices=rest_vertices,
     )
     return garment.with_vertices(x_final), report
 
 
-def _newton_step(x, cloth_gradient, distance, normal, in_range, hessian: SparseHessian, element_energies,
-                 held: torch.Tensor, inner_iterations: int = 2) -> torch.Tensor:
-    """(V,3) step s minimising g·s + ½ sᵀHs + w Σ max(ε − d_i − n_i·s_i, 0)³: the cloth's
-    quadratic model plus the exact penalty along the frozen contact normals n_i."""
+def _newton_step(x, cloth_gradient, distance, normal, in_range, hessian: SparseHessian, cloth_hessian,
+                 held: torch.Tensor, damping: float, inner_iterations: int = 2) -> torch.Tensor:
+    """(V,3) step s minimising g·s + ½ sᵀ(H + damping·diag H)s + w Σ max(ε − d_i − n_i·s_i, 0)³:
+    the cloth's quadratic model plus the exact penalty along the frozen contact normals n_i.
+    The damping (at least ``MIN_DAMPING``, which keeps free rigid motions solvable) grows
+    while no step along the result decreases the energy."""
     weight = DRAPE_COLLISION_WEIGHT
-    cloth = hessian.matrix([element_hessians(x, elements, energy) for elements, energy in element_energies])
-    cloth = cloth + sparse.diags(1e-6 * cloth.diagonal())  # keeps free rigid motions solvable
+    cloth = cloth_hessian + sparse.diags(damping * cloth_hessian.diagonal())
     if held.any():  # springs a million times the stiffest coordinate's hold these in place
         cloth = cloth + hessian.vertex_blocks(1e6 * cloth.diagonal().max() * held[:, None, None] * torch.eye(3))
     gradient = hessian.to_free(cloth_gradient)

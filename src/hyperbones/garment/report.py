@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import time
 from pathlib import Path
 
@@ -19,13 +20,14 @@ CORNER_BODIES = ("gender=0,weight=0,height=0", "gender=1,muscle=1,weight=1,heigh
 
 def drape_table(resolutions: list[int], bodies: list[str], mhclo_files: list[Path], progress: bool = True) -> str:
     """Markdown table per garment and body: collision % (d < 0) and edge/area error % after
-    draping, and the force balance the drape reached: the 95th percentile and maximum over
-    free vertices of |∇E_i| / (m_i g), with its Newton iterations."""
+    draping, and how close to rest the drape got: the 95th percentile and maximum over free
+    vertices of |∇E_i| / (m_i g), the longest vertex move of its last Newton step, whether
+    either met its tolerance, and its Newton iterations."""
     jobs = [(name, n) for name in TEMPLATES for n in resolutions]
     jobs += [(str(path), None) for path in mhclo_files]
     rows = ["| garment | vertices | body | penetrating before | collision % after | edge error % | "
-            "area error % | force p95 | force max | iterations | make s | drape s |",
-            "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+            "area error % | force p95 | force max | last step mm | at rest | iterations | make s | drape s |",
+            "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
     bar = tqdm(total=len(bodies) * (len(TEMPLATES) * len(resolutions) + 2 * len(mhclo_files)),
                desc="drape", disable=not progress)
     for body_text in bodies:
@@ -49,7 +51,8 @@ def drape_table(resolutions: list[int], bodies: list[str], mhclo_files: list[Pat
                 collision = 100.0 * float((distance < 0).float().mean())
                 rows.append(f"| {label} | {garment.num_vertices} | {body.shape.label()} | {report.penetrating_before} | "
                             f"{collision:.3f} | {report.edge_error_pct:.2f} | {report.area_error_pct:.2f} | "
-                            f"{report.force_ratio_p95:.3f} | {report.force_ratio_max:.1f} | {report.iterations} | "
+                            f"{report.force_ratio_p95:.3f} | {report.force_ratio_max:.1f} | {_millimetres(report.newton_step_max)} | "
+                            f"{'yes' if report.converged else 'no'} | {report.iterations} | "
                             f"{made - start:.1f} | {took:.1f} |")
                 bar.update(1)
     bar.close()
@@ -57,3 +60,7 @@ def drape_table(resolutions: list[int], bodies: list[str], mhclo_files: list[Pat
 
 
 __all__ = ["CORNER_BODIES", "drape_table"]
+
+
+def _millimetres(metres: float) -> str:
+    return "–" if math.isnan(metres) else f"{1000 * metres:.3f}"
