@@ -2,7 +2,13 @@
 garment to another body shape before settling it there.
 
 The drape looks for a local minimum of stretching + bending + gravity + body collision
-(REFERENCE.md energies) over the free vertices, pinned ones held, by Newton's method:
++ friction (REFERENCE.md energies) over the free vertices, pinned ones held, by Newton's
+method:
+
+- Friction is lagged (IPC's way): each iteration measures slip from where it starts, so
+  cloth resting on a sloped surface (shoulders, hips) slides only where the pull along
+  the skin beats μ m g. Without it, an open shirt on sloping shoulders slides on for
+  hundreds of iterations.
 
 - Contact: the collision term's distance d_i is the exact signed distance to the skin:
   at every evaluation ``BodyProximity`` finds each vertex's nearest skin point p_i, and
@@ -29,7 +35,8 @@ The drape looks for a local minimum of stretching + bending + gravity + body col
   - force balance: the 95th percentile over free vertices of |∇E_i| / (m_i g) is below
     ``force_tolerance`` (95 % of the vertices carry an out-of-balance force under that
     fraction of their own weight; the collision term is part of E, so a vertex resting on
-    the skin counts as balanced when the skin's push carries it);
+    the skin counts as balanced when the skin's push carries it, and static friction takes
+    up to μ m g of the pull along the skin);
   - the Newton step moves no vertex farther than ``step_tolerance`` (IPC's stopping rule:
     the configuration is that close to the minimum of its local model). Cloth that
     buckles under gravity (compressed StVK and bending are non-convex) can sit at such a
@@ -56,7 +63,8 @@ from hyperbones.body.anny_body import Body
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.proximity import BodyProximity, face_planes
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.energies import GRAVITY, bending_energy, collision_energy, gravity_energy, stretching_energy
+from hyperbones.physics.energies import (FRICTION_COEFFICIENT, FRICTION_CONTACT_RADIUS, GRAVITY, bending_energy,
+                                         collision_energy, friction_energy, gravity_energy, stretching_energy)
 from hyperbones.physics.metrics import area_error_pct, edge_error_pct
 from hyperbones.physics.sparse_hessian import SparseHessian, element_hessians
 
@@ -65,6 +73,7 @@ DRAPE_COLLISION_WEIGHT = 5e5  # HOOD's final weight: at rest nothing may pass th
 FORCE_TOLERANCE = 0.1  # stop once p95 over free vertices of |∇E_i| / (m_i g) is below this,
 STEP_TOLERANCE = 1e-4  # m: or once the Newton step moves no vertex farther than this (IPC's rule)
 CONTACT_RANGE = 0.1  # m: vertices farther from the skin feel no collision
+DRAPE_FRICTION_SMOOTHING = 1e-4  # m: friction's smooth norm turns linear past 0.1 mm of slip
 MIN_DAMPING, MAX_DAMPING = 1e-6, 1e2  # Levenberg-Marquardt damping, relative to the Hessian's diagonal
 
 
@@ -147,21 +156,34 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
     element_energies = [(rest.faces, lambda points, faces: stretching_energy(points, replace(rest, faces=faces))),
                         (rest.hinges, lambda points, hinges: bending_energy(points, replace(rest, hinges=hinges)))]
     hessian = SparseHessian([rest.faces, rest.hinges], free, x)
+    every_vertex = torch.arange(len(x))[:, None]
 
     def planes_for(positions):
         return _contact_planes(positions, proximity, body_vertices, body.faces)
 
+    # Friction against the skin, lagged (as IPC does): each iteration's slip is measured
+    # from where that iteration starts, so cloth on a sloped surface (shoulders, hips)
+    # slides only where the pull along the skin beats μ m g, as Coulomb friction has it.
+    lagged = {}
+
+    def friction(positions):
+        anchor, (points, normals) = lagged["x"], lagged["planes"]
+        return friction_energy(positions, anchor, points, points, normals, rest, smoothing=DRAPE_FRICTION_SMOOTHING)
+
     def cloth_energy(positions):
-        return stretching_energy(positions, rest) + bending_energy(positions, rest) + gravity_energy(positions, rest)
+        return (stretching_energy(positions, rest) + bending_energy(positions, rest) + gravity_energy(positions, rest)
+                + friction(positions))
 
     def total_energy(positions, planes):
         return float(cloth_energy(positions) + collision_energy(positions, *planes, eps=COLLISION_MARGIN,
                                                                 weight=DRAPE_COLLISION_WEIGHT))
 
     planes = planes_for(x)
+    lagged.update(x=x, planes=planes)
     energy_before = total_energy(x, planes)
     iterations, newton_step_max = 0, float("inf")
     while True:
+        lagged.update(x=x, planes=planes)
         positions = x.clone().requires_grad_(True)
         (cloth_gradient,) = torch.autograd.grad(cloth_energy(positions), positions)
         origin, normal = planes
@@ -169,12 +191,14 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
         in_range = normal.square().sum(-1) > 0
         depth = torch.where(in_range, (COLLISION_MARGIN - distance).clamp_min(0.0), torch.zeros_like(distance))
         gradient = cloth_gradient - (3 * DRAPE_COLLISION_WEIGHT * depth.square())[:, None] * normal
-        ratio = (gradient.norm(dim=-1) / weight)[free]
+        ratio = (_unbalanced_force(gradient, normal, in_range & (distance < FRICTION_CONTACT_RADIUS), weight)
+                 / weight)[free]
         ratio_p95, ratio_max = (float(torch.quantile(ratio, 0.95)), float(ratio.max())) if len(ratio) else (0.0, 0.0)
         if ratio_p95 < force_tolerance or iterations >= max_iterations:
             newton_step_max = float("nan")  # no step solved at the returned state
             break
         cloth_hessian = hessian.matrix([element_hessians(x, elements, energy) for elements, energy in element_energies])
+        cloth_hessian = cloth_hessian + hessian.vertex_blocks(element_hessians(x, every_vertex, lambda points, _: friction(points)))
         held, damping = torch.zeros(len(x), dtype=torch.bool), MIN_DAMPING
         step = _newton_step(x, cloth_gradient, distance, normal, in_range, hessian, cloth_hessian, held, damping)
         newton_step_max = float(step.norm(dim=-1).max())
@@ -206,6 +230,17 @@ def drape(garment: Garment, body: Body, max_iterations: int = 100, force_toleran
         rest_vertices=rest_vertices,
     )
     return garment.with_vertices(x_final), report
+
+
+def _unbalanced_force(gradient: torch.Tensor, normal: torch.Tensor, touching: torch.Tensor,
+                      weight: torch.Tensor) -> torch.Tensor:
+    """(V,) the force friction cannot hold: |∇E_i|, except that a vertex touching the skin
+    (normal n_i) has up to μ m_i g of the pull along the skin taken by static friction."""
+    along = gradient - (gradient * normal).sum(-1, keepdim=True) * normal
+    across = gradient - along
+    held = along.norm(dim=-1).clamp_max(FRICTION_COEFFICIENT * weight)
+    slipping = along * (1 - held / along.norm(dim=-1).clamp_min(1e-30))[:, None]
+    return torch.where(touching, (across + slipping).norm(dim=-1), gradient.norm(dim=-1))
 
 
 def _newton_step(x, cloth_gradient, distance, normal, in_range, hessian: SparseHessian, cloth_hessian,
