@@ -47,3 +47,16 @@ def test_messages_reach_only_along_edges():
     after = trunk(changed, edges)
     assert not torch.allclose(base[1], after[1])  # node 1 hears node 0
     assert torch.allclose(base[2], after[2])  # node 2 hears nobody
+
+
+def test_normalizer_statistics_skip_blown_up_batches():
+    from hyperbones.models.normalizer import Normalizer
+
+    normalizer = Normalizer(2)
+    normalizer(torch.tensor([[1.0, 2.0], [3.0, 6.0]]))
+    mean, std = normalizer.mean.clone(), normalizer.std.clone()
+    out = normalizer(torch.tensor([[float("nan"), 1.0], [1e200, 0.0]], dtype=torch.float64))
+    assert torch.equal(normalizer.mean, mean) and torch.equal(normalizer.std, std)
+    assert torch.isfinite(out[1, 1])  # the finite entries are still normalised with the kept statistics
+    normalizer(torch.tensor([[5.0, 10.0]]))
+    assert torch.allclose(normalizer.mean, torch.tensor([3.0, 6.0], dtype=torch.float64))

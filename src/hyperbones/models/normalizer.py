@@ -12,8 +12,10 @@ class Normalizer(nn.Module):
     While training, each forward adds its batch to the statistics until
     ``max_accumulations`` batches have been seen (MeshGraphNets keeps accumulating for most
     of training: states seen late in training, such as long rollouts, differ from early
-    ones); after that, and in eval mode, they are fixed. The statistics are buffers, so they are saved in checkpoints (and DDP keeps the
-    replicas equal by broadcasting them from rank 0).
+    ones); after that, and in eval mode, they are fixed. A batch with a non-finite value (or
+    one whose square overflows) is left out, so one blown-up state cannot poison them. The
+    statistics are buffers, so they are saved in checkpoints (and DDP keeps the replicas
+    equal by broadcasting them from rank 0).
     """
 
     def __init__(self, size: int, max_accumulations: int = 100_000, std_epsilon: float = 1e-2):
@@ -28,6 +30,8 @@ class Normalizer(nn.Module):
     def forward(self, features: torch.Tensor) -> torch.Tensor:
         if self.training and self.batches < self.max_accumulations and features.shape[0] > 0:
             flat = features.detach().reshape(-1, features.shape[-1]).double()
+            if not bool(torch.isfinite(flat.square().sum(0)).all()):
+                return (features - self.mean.to(features)) / self.std.to(features)  # a blown-up state: not counted
             self.count += flat.shape[0]
             self.batches += 1
             self.sum += flat.sum(0)
