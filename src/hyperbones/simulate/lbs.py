@@ -20,6 +20,8 @@ from hyperbones.geometry.proximity import BodyProximity
 
 SMOOTHING_LENGTH = 0.15  # metres the weights are diffused over
 FREE_DISTANCE = 0.05  # cloth this far from the skin (or more) diffuses fully
+TEAR_JUMP = 0.3  # L1 change of the weights across one edge that marks a tear line
+TEAR_BAND = 0.05  # m: cloth this close (along the garment) to a tear line diffuses fully
 
 
 def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float = SMOOTHING_LENGTH) -> torch.Tensor:
@@ -31,7 +33,18 @@ def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float =
     weights = (nearest.barycentric[..., None] * body.skin_weights[corners]).sum(1)
     edges = garment.edges()
     edge_length = float((garment.vertices[edges[:, 0]] - garment.vertices[edges[:, 1]]).norm(dim=-1).mean())
-    rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)[:, None]
+    rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)
+    # Cloth touching two body parts at once (a skirt's front across both thighs) takes its
+    # nearest-skin weights from one part or the other, and LBS would tear it along that
+    # line: a band of TEAR_BAND metres around such a line diffuses fully as well.
+    tear = torch.zeros(len(weights), dtype=torch.bool)
+    torn = (weights[edges[:, 0]] - weights[edges[:, 1]]).abs().sum(1) > TEAR_JUMP
+    tear[edges[torn].reshape(-1)] = True
+    for _ in range(max(1, round(TEAR_BAND / edge_length))):  # grow the band by one ring of edges
+        reached = torch.zeros(len(weights)).index_add_(0, edges[:, 0], tear[edges[:, 1]].float())
+        reached.index_add_(0, edges[:, 1], tear[edges[:, 0]].float())
+        tear |= reached > 0
+    rate = torch.where(tear, torch.full_like(rate, 0.5), rate)[:, None]
     weights = diffuse(weights, edges, rate, diffusion_steps(smoothing_length, edge_length))
     return weights / weights.sum(1, keepdim=True)
 

@@ -36,7 +36,7 @@ from hyperbones.simulate.garments import cache_dir
 from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
 from hyperbones.training.config import DataConfig
 
-TEMPLATE_CACHE_VERSION = 2
+TEMPLATE_CACHE_VERSION = 3
 
 
 @dataclass
