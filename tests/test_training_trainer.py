@@ -12,7 +12,7 @@ from hyperbones.errors import ParameterError
 from hyperbones.training.checkpoint import export_weights, load_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.loss import collision_weight_at
-from hyperbones.training.trainer import TeacherTrainer, rollout_length
+from hyperbones.training.trainer import TeacherTrainer, rollout_length, teacher_from_checkpoint
 
 TINY = {"model": {"latent": 16, "blocks": 2},
         "data": {"templates": ["tshirt"], "resolutions": [1000], "train_clips": [], "builtins": ["walk"],
@@ -57,6 +57,14 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
     assert any(not torch.equal(a, b) for a, b in zip(before, trainer.model.parameters()))
     payload = load_checkpoint(tmp_path / "run" / "checkpoint.pt")
     assert payload["step"] == 2 and payload["config"] == config.as_dict()
+    # The weights' moving average moved from the start towards the weights, not onto them.
+    name = next(n for n, _ in trainer.model.named_parameters())
+    average, start, now = payload["ema"][name], before[0], payload["model"][name]
+    assert not torch.equal(average, start) and not torch.equal(average, now)
+    assert float((average - start).norm()) < float((now - start).norm())
+    assert torch.equal(payload["ema"]["node_normalizer.sum"], payload["model"]["node_normalizer.sum"])
+    model, _ = teacher_from_checkpoint(tmp_path / "run" / "checkpoint.pt")
+    assert torch.equal(model.state_dict()[name], average)
     assert list((tmp_path / "run" / "tensorboard").iterdir())
 
     with pytest.raises(ParameterError, match="--resume"):

@@ -42,13 +42,14 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
 
 
 def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
-    """Write the inference part of a training checkpoint (model, config, step) to ``out``, and
+    """Write the inference part of a training checkpoint (the weights' moving average when it
+    keeps one, else the model; config, step) to ``out``, and
     beside it ``<out>.md``: the config and a summary of the run's TensorBoard log when the
     checkpoint's folder has one."""
     from hyperbones.training.summary import training_summary
 
     payload = load_checkpoint(checkpoint)
-    slim = {"model": payload["model"], "config": payload["config"], "step": payload["step"]}
+    slim = {"model": payload.get("ema") or payload["model"], "config": payload["config"], "step": payload["step"]}
     out = save_checkpoint(out, slim)
     log_dir = Path(checkpoint).parent / "tensorboard"
     summary = training_summary(log_dir) if log_dir.exists() else "(no TensorBoard log beside the checkpoint)"

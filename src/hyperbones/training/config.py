@@ -58,6 +58,9 @@ class TrainConfig:
     init_from: a training checkpoint (path relative to the folder the command runs in) whose
         model weights and input statistics a new run starts from, with a fresh optimiser and
         step 0; its model section must match this config's. Empty: random initialisation.
+    ema_decay: the checkpoint also keeps an exponential moving average of the weights with
+        this decay per step, and inference loads it (single steps of the one-step physics
+        loss move the weights noisily; the average rolls out more steadily). 0: none.
     """
 
     steps: int = 100_000
@@ -74,6 +77,7 @@ class TrainConfig:
     seed: int = 0
     device: str = "auto"
     init_from: str = ""
+    ema_decay: float = 0.999
 
 
 @dataclass(frozen=True)

@@ -81,11 +81,14 @@ class TeacherTrainer:
             self.model.load_state_dict(payload["model"])
             self.optimizer.load_state_dict(payload["optimizer"])
             self.step = int(payload["step"])
+            self.ema = payload.get("ema")
             episode_seed += 7919 * self.step
         elif self.checkpoint_path.exists() and not resume:
             raise ParameterError(f"{self.run_dir} already holds a run: pass --resume to continue it or use another --out")
         elif config.train.init_from:
             self._initialise_from(Path(config.train.init_from))
+        if getattr(self, "ema", None) is None:
+            self.ema = {name: value.detach().clone() for name, value in self.model.state_dict().items()}
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
         self.data = TeacherData(config.data, seed=episode_seed,
                                 progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
@@ -166,6 +169,7 @@ class TeacherTrainer:
         grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
         if torch.isfinite(grad_norm):
             self.optimizer.step()  # every rank sees the same averaged gradient, so all skip together
+            self._update_average()
         self._k += 1
         if torch.isfinite(positions_next).all():
             # The loss saw the raw prediction; the state carried on gets the runtime's hard contact.
@@ -184,6 +188,17 @@ class TeacherTrainer:
         logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
                     rollout=rollout_length(self.step, cfg.train), settle=float(self._k == 0))
         return logs
+
+    @torch.no_grad()
+    def _update_average(self) -> None:
+        """The weights' moving average (``train.ema_decay``); buffers (input statistics) are copied."""
+        decay = self.config.train.ema_decay
+        parameters = {name for name, _ in self.model.named_parameters()}
+        for name, value in self.model.state_dict().items():
+            if name in parameters:
+                self.ema[name].mul_(decay).add_(value, alpha=1.0 - decay)
+            else:
+                self.ema[name].copy_(value)
 
     # -- the loop -----------------------------------------------------------------------
     def train(self) -> int:
@@ -218,7 +233,7 @@ class TeacherTrainer:
             return
         save_checkpoint(self.checkpoint_path, {
             "model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(), "step": self.step,
-            "config": self.config.as_dict(),
+            "config": self.config.as_dict(), "ema": self.ema,
         })
 
     def close(self) -> None:
@@ -229,10 +244,11 @@ class TeacherTrainer:
 
 
 def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[Teacher, dict]:
-    """The teacher model (eval mode) and the checkpoint's payload."""
+    """The teacher model (eval mode; the weights' moving average when the checkpoint keeps
+    one) and the checkpoint's payload."""
     payload = load_checkpoint(path, map_location=device)
     model = Teacher(TrunkConfig(**payload["config"]["model"])).to(device)
-    model.load_state_dict(payload["model"])
+    model.load_state_dict(payload.get("ema") or payload["model"])
     model.eval()
     return model, payload
 
