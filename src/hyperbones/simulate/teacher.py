@@ -2,7 +2,9 @@
 
 Frame 0 is the draped garment skinned to the first pose (any cloth inside the body pushed
 out to the collision margin), relaxed by one long settling step with the body held still,
-as every training episode starts; each later frame is one teacher step. Pinned vertices follow the body by LBS.
+as every training episode starts; each later frame is one teacher step. Pinned vertices
+follow the body by LBS; after every step, cloth that ended inside the body is moved out to
+the collision margin with the push kept as velocity (``resolve_contact``, as in training).
 """
 
 from __future__ import annotations

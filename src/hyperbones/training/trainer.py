@@ -72,6 +72,7 @@ class TeacherTrainer:
         self.model = Teacher(config.model).to(self.device)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.train.learning_rate)
         self.step = 0
+        self.ema: dict[str, torch.Tensor] | None = None  # the weights' moving average (train.ema_decay)
         self.checkpoint_path = self.run_dir / "checkpoint.pt"
         episode_seed = config.train.seed * 1000 + self.rank
         if resume and self.checkpoint_path.exists():
@@ -87,7 +88,7 @@ class TeacherTrainer:
             raise ParameterError(f"{self.run_dir} already holds a run: pass --resume to continue it or use another --out")
         elif config.train.init_from:
             self._initialise_from(Path(config.train.init_from))
-        if getattr(self, "ema", None) is None:
+        if self.ema is None:
             self.ema = {name: value.detach().clone() for name, value in self.model.state_dict().items()}
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
         self.data = TeacherData(config.data, seed=episode_seed,
