@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 import warnings
@@ -129,9 +130,11 @@ def cmd_garment_make(args) -> int:
     note = "not draped"
     if not args.no_drape:
         garment, report = drape(garment, body)
-        balance = "in force balance" if report.converged else "NOT in force balance"
-        note = (f"draped in {report.iterations} Newton iterations, {balance} (95 % of free vertices carry an "
-                f"unbalanced force under {report.force_ratio_p95:.3f} of their weight); edge error "
+        rest = "at rest" if report.converged else "NOT at rest"
+        last_step = "" if math.isnan(report.newton_step_max) else (
+            f", last Newton step {1000 * report.newton_step_max:.3f} mm")
+        note = (f"draped in {report.iterations} Newton iterations, {rest} (95 % of free vertices carry an "
+                f"unbalanced force under {report.force_ratio_p95:.3f} of their weight{last_step}); edge error "
                 f"{report.edge_error_pct:.2f} %, penetrating vertices {report.penetrating_before} -> "
                 f"{report.penetrating_after}")
     path = write_obj_garment(args.out, garment) or args.out
