@@ -61,7 +61,7 @@ import torch
 
 from hyperbones.body.anny_body import Body
 from hyperbones.garment.garment import Garment
-from hyperbones.geometry.proximity import BodyProximity, face_planes
+from hyperbones.geometry.proximity import BodyProximity, face_planes, push_outside
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import (FRICTION_COEFFICIENT, FRICTION_CONTACT_RADIUS, GRAVITY, bending_energy,
                                          collision_energy, friction_energy, gravity_energy, stretching_energy)
@@ -102,10 +102,7 @@ class DrapeReport:
 def _project_outside(points: torch.Tensor, proximity: BodyProximity, margin: float) -> tuple[torch.Tensor, int]:
     """Move points closer to the body than ``margin`` (or inside it) to ``margin`` outside."""
     nearest = proximity.query(points, max_distance=0.5)
-    close = nearest.found & (nearest.signed_distance < margin)
-    moved = points.clone()
-    moved[close] = nearest.point[close] + margin * nearest.normal[close]
-    return moved, int((nearest.found & (nearest.signed_distance < 0)).sum())
+    return push_outside(points, nearest, margin), int((nearest.found & (nearest.signed_distance < 0)).sum())
 
 
 def _contact_planes(points: torch.Tensor, proximity: BodyProximity, body_vertices: torch.Tensor,
