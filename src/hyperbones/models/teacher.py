@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from hyperbones.geometry.proximity import push_outside
 from hyperbones.models.cloth_graph import EDGE_FEATURES, NODE_FEATURES, ClothGraph
 from hyperbones.models.mgn import EdgeSet, MeshGraphNet, mlp
 from hyperbones.models.normalizer import Normalizer
@@ -79,8 +80,7 @@ def resolve_contact(positions: torch.Tensor, velocities: torch.Tensor, nearest, 
     cloth that a limb reached moves on with the limb instead of carrying the penetration
     into the next step, where the one-sided collision term may push it out on the wrong side.
     """
-    inside = nearest.found & (nearest.signed_distance < 0) & movable
-    pushed = torch.where(inside[:, None], (nearest.point + margin * nearest.normal).to(positions), positions)
+    pushed = push_outside(positions, nearest, margin, movable=movable & (nearest.signed_distance < 0))
     return pushed, velocities + (pushed - positions)
 
 

@@ -74,8 +74,7 @@ class TeacherMethod:
             # Frame 0: settle on the still body; frame t > 0: the step from t-1 to t.
             now, nxt = (0, 0) if t == 0 else (t - 1, t)
             body_now, body_next = body[now].to(self.device), body[nxt].to(self.device)
-            proximity.update(body_now)
-            nearest = proximity.query(positions, max_distance=QUERY_DISTANCE)
+            nearest = proximity.query(positions, max_distance=QUERY_DISTANCE)  # the BVH holds body_now already
             positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)

@@ -156,7 +156,7 @@ class TeacherTrainer:
         body_next = episode.body_vertices[frame_next].to(self.device)
         pinned_next = episode.garment_lbs[frame_next].to(self.device)
         positions, velocities = self._state
-        self.proximity.update(body_now)
+        # The BVH holds body_now already: posed at the episode's start, or by the last step's contact.
         nearest = self.proximity.query(positions, max_distance=QUERY_DISTANCE)
         positions_next, velocities_next = teacher_step(self.ddp, topology, rest, positions, velocities, pinned_next,
                                                        body_now, body_next, self.body_faces, nearest, dt)
