@@ -3,8 +3,10 @@
 Frame 0 is the draped garment skinned to the first pose (any cloth inside the body pushed
 out to the collision margin), relaxed by one long settling step with the body held still,
 as every training episode starts; each later frame is one teacher step. Pinned vertices
-follow the body by LBS; after every step, cloth that ended inside the body is moved out to
-the collision margin with the push kept as velocity (``resolve_contact``, as in training).
+follow the body by LBS. After every step, as in training, strain limiting keeps each edge
+within a narrow band of its rest length (``physics.strain_limit``), then cloth that ended
+inside the body is moved out to the collision margin (``resolve_contact``); both keep
+their moves as velocity.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from hyperbones.models.teacher import resolve_contact, teacher_step
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.training.checkpoint import SHIPPED_TEACHER
 from hyperbones.training.trainer import QUERY_DISTANCE, pick_device, teacher_from_checkpoint
@@ -48,6 +51,7 @@ class TeacherMethod:
         self.rest = rest.to(self.device)
         self.topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
                                               material).to(self.device)
+        self.limiter = StrainLimiter.for_topology(self.topology)
         self.canonical = garment.vertices
         self.skin_weights = garment_skin_weights(garment, body)
         self.body_faces = body.faces.to(self.device)
@@ -78,6 +82,7 @@ class TeacherMethod:
             positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)
+            positions, velocities = self.limiter(positions, velocities)
             proximity.update(body_next)
             positions, velocities = resolve_contact(positions, velocities,
                                                     proximity.query(positions, max_distance=QUERY_DISTANCE),

@@ -28,6 +28,7 @@ from hyperbones.geometry.diffusion import diffuse, diffusion_steps
 from hyperbones.geometry.proximity import BodyProximity, surface_points
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.cloth_graph import GarmentTopology
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
 from hyperbones.physics.cloth import ClothRest
@@ -105,7 +106,8 @@ class Identity:
     """One garment on one body with one fabric: what the physics and the graph need.
 
     rest: the cloth's rest state (float32); topology: the graph's fixed part;
-    skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them).
+    skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them);
+    limiter: the strain limiting applied to each step's result (``physics.strain_limit``).
     """
 
     name: str
@@ -113,13 +115,14 @@ class Identity:
     rest: ClothRest
     topology: GarmentTopology
     skin_weights: torch.Tensor
+    limiter: StrainLimiter
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
               skin_weights: torch.Tensor, material: Material) -> "Identity":
         rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
         topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
-        return cls(name, body, rest, topology, skin_weights)
+        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_topology(topology))
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
         """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""

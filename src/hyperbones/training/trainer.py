@@ -17,6 +17,7 @@ GPU: eight episodes per optimiser step).
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from pathlib import Path
@@ -173,8 +174,10 @@ class TeacherTrainer:
             self._update_average()
         self._k += 1
         if torch.isfinite(positions_next).all():
-            # The loss saw the raw prediction; the state carried on gets the runtime's hard contact.
-            positions_next, velocities_next = positions_next.detach(), velocities_next.detach()
+            # The loss saw the raw prediction; the state carried on gets the runtime's strain
+            # limiting and hard contact.
+            positions_next, velocities_next = identity.limiter.to(self.device)(positions_next.detach(),
+                                                                               velocities_next.detach())
             self.proximity.update(body_next)
             positions_next, velocities_next = resolve_contact(
                 positions_next, velocities_next, self.proximity.query(positions_next, max_distance=QUERY_DISTANCE),
@@ -212,14 +215,16 @@ class TeacherTrainer:
                 logs = self._advance()
                 self.step += 1
                 for key, value in logs.items():
-                    running[key] = 0.9 * running.get(key, value) + 0.1 * value
+                    if math.isfinite(value):  # one blown-up episode must not blank the bar for good
+                        running[key] = 0.9 * running.get(key, value) + 0.1 * value
                 if self.is_main and self.step % self.config.train.log_every == 0:
                     for key, value in logs.items():
                         self.writer.add_scalar(f"train/{key}", value, self.step)
                     rate = (self.step - first_step) / max(time.perf_counter() - started, 1e-9)
                     self.writer.add_scalar("train/steps_per_second", rate, self.step)
-                    bar.set_postfix(loss=f"{running['loss']:.3g}", strain=f"{running['stretching']:.3g}",
-                                    coll=f"{running['collision']:.2g}", refresh=False)
+                    shown = {key: running.get(key, math.nan) for key in ("loss", "stretching", "collision")}
+                    bar.set_postfix(loss=f"{shown['loss']:.3g}", strain=f"{shown['stretching']:.3g}",
+                                    coll=f"{shown['collision']:.2g}", refresh=False)
                 bar.update(1)
                 if self.step % self.config.train.checkpoint_every == 0 or self.step == total:
                     self.save()

@@ -1,0 +1,103 @@
+"""Strain limiting: a position-based projection that keeps every mesh edge within a band
+around its rest length (Provot 1995's strain limiting, as position-based dynamics projects
+edge constraints).
+
+Woven cloth barely stretches: its stretching stiffness is orders of magnitude above its
+bending stiffness, so an explicit or learnt integrator that gets the accelerations slightly
+wrong leaves the cloth visibly elastic. A few projection sweeps after each step remove that
+error at a fixed, small cost. Limiting the three edges of every triangle bounds its whole
+metric, so shear is limited as well as stretch.
+
+Each sweep measures all edges at once, moves both ends of every edge outside the band
+towards the band's edge in proportion to their inverse masses (pinned vertices do not
+move), and averages the corrections a vertex receives over its edges (Jacobi), so the
+result does not depend on edge order and the loop runs over sweeps only. The averaging
+under-relaxes: 40 sweeps pull the bulk of the error in without converging. Exact
+projections coloured Gauss-Seidel style were tried for the teacher and left a few
+triangles stretched 2-3x where a pull towards the body met the contact push, which
+raised the strain energy on held-out clips (dress 0.40 J with these sweeps, 2.4-5.1 J).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+# The teacher's band: woven cloth stretches by a percent or so under its own weight and
+# buckles rather than compresses in-plane.
+STRETCH_LIMIT = 0.01  # an edge may grow to 1.01 l0
+COMPRESSION_LIMIT = 0.03  # and shrink to 0.97 l0: woven cloth buckles rather than compresses
+LIMIT_ITERATIONS = 40
+
+
+@dataclass
+class StrainLimiter:
+    """Projection of garment positions towards ``(1 - compression) l0 <= l <= (1 + stretch) l0``.
+
+    edges: (E,2) vertex indices of each undirected edge; rest_lengths: (E,);
+    inverse_masses: (V,) 1/kg, 0 for pinned vertices; edge_counts: (V,) edges per vertex.
+    """
+
+    edges: torch.Tensor
+    rest_lengths: torch.Tensor
+    inverse_masses: torch.Tensor
+    edge_counts: torch.Tensor
+    stretch: float = STRETCH_LIMIT
+    compression: float = COMPRESSION_LIMIT
+    iterations: int = LIMIT_ITERATIONS
+
+    @classmethod
+    def build(cls, rest_vertices: torch.Tensor, faces: torch.Tensor, masses: torch.Tensor, pinned_mask: torch.Tensor,
+              stretch: float = STRETCH_LIMIT, compression: float = COMPRESSION_LIMIT,
+              iterations: int = LIMIT_ITERATIONS) -> "StrainLimiter":
+        """rest_vertices (V,3), faces (F,3), masses (V,) kg, pinned_mask (V,) bool."""
+        if not (stretch >= 0 and 0 <= compression < 1 and iterations >= 0):
+            raise ValueError(f"strain limits need stretch >= 0, 0 <= compression < 1 and iterations >= 0; "
+                             f"got {stretch}, {compression}, {iterations}")
+        pairs = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).sort(dim=1).values
+        edges = torch.unique(pairs, dim=0)
+        rest_lengths = (rest_vertices[edges[:, 1]] - rest_vertices[edges[:, 0]]).norm(dim=-1)
+        inverse_masses = torch.where(pinned_mask, torch.zeros_like(masses), 1.0 / masses.clamp_min(1e-12))
+        counts = torch.zeros(len(rest_vertices), dtype=torch.float32, device=rest_vertices.device)
+        counts.index_add_(0, edges.reshape(-1), torch.ones(edges.numel(), device=counts.device))
+        return cls(edges, rest_lengths.float(), inverse_masses.float(), counts.clamp_min(1.0),
+                   float(stretch), float(compression), int(iterations))
+
+    @classmethod
+    def for_topology(cls, topology) -> "StrainLimiter":
+        """The teacher's limiter for a ``models.cloth_graph.GarmentTopology`` (its rest shape,
+        masses and pins), with the module's band."""
+        return cls.build(topology.rest_vertices, topology.faces, topology.masses, topology.pinned_mask)
+
+    def to(self, device: torch.device | str) -> "StrainLimiter":
+        return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),
+                             self.edge_counts.to(device), self.stretch, self.compression, self.iterations)
+
+    def project(self, positions: torch.Tensor) -> torch.Tensor:
+        """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps."""
+        first, second = self.edges[:, 0], self.edges[:, 1]
+        w_first, w_second = self.inverse_masses[first], self.inverse_masses[second]
+        w_sum = (w_first + w_second).clamp_min(1e-30)  # both pinned: both weights 0, nothing moves
+        share_first, share_second = (w_first / w_sum)[:, None], (w_second / w_sum)[:, None]
+        low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
+        x = positions
+        for _ in range(self.iterations):
+            along = x[second] - x[first]
+            length = along.norm(dim=-1).clamp_min(1e-12)
+            excess = length - length.clamp(low, high)  # > 0 too long, < 0 too short, 0 inside the band
+            correction = (excess / length)[:, None] * along  # the move that would close the whole excess
+            step = torch.zeros_like(x)
+            step.index_add_(0, first, share_first * correction)
+            step.index_add_(0, second, -share_second * correction)
+            x = x + step / self.edge_counts[:, None]
+        return x
+
+    def __call__(self, positions: torch.Tensor, velocities: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """(V,3) positions and per-step velocities -> both after the projection; the move is
+        kept as velocity, as position-based dynamics does."""
+        projected = self.project(positions)
+        return projected, velocities + (projected - positions)
+
+
+__all__ = ["StrainLimiter", "STRETCH_LIMIT", "COMPRESSION_LIMIT", "LIMIT_ITERATIONS"]

@@ -1,0 +1,61 @@
+"""Strain limiting: edges end inside their band, pinned vertices stay, moves become velocity."""
+
+import pytest
+import torch
+
+from hyperbones.physics.strain_limit import StrainLimiter
+
+
+def _grid(n: int = 8, spacing: float = 0.02) -> tuple[torch.Tensor, torch.Tensor]:
+    """A flat n×n vertex grid in the xy-plane: (n²,3) vertices, (2(n−1)²,3) faces."""
+    ij = torch.stack(torch.meshgrid(torch.arange(n), torch.arange(n), indexing="ij"), -1).reshape(-1, 2)
+    vertices = torch.cat([ij.float() * spacing, torch.zeros(n * n, 1)], dim=1)
+    index = torch.arange(n * n).reshape(n, n)
+    a, b, c, d = index[:-1, :-1].reshape(-1), index[1:, :-1].reshape(-1), index[:-1, 1:].reshape(-1), index[1:, 1:].reshape(-1)
+    faces = torch.cat([torch.stack([a, b, d], 1), torch.stack([a, d, c], 1)])
+    return vertices, faces
+
+
+def _edge_ratios(limiter: StrainLimiter, positions: torch.Tensor) -> torch.Tensor:
+    e = limiter.edges
+    return (positions[e[:, 1]] - positions[e[:, 0]]).norm(dim=-1) / limiter.rest_lengths
+
+
+def test_stretched_cloth_is_pulled_back_into_the_band():
+    rest, faces = _grid()
+    pinned = torch.zeros(len(rest), dtype=torch.bool)
+    limiter = StrainLimiter.build(rest, faces, torch.full((len(rest),), 1e-4), pinned, stretch=0.01,
+                                  compression=0.03, iterations=200)
+    torch.manual_seed(0)
+    stretched = rest * torch.tensor([1.3, 1.0, 1.0]) + 0.002 * torch.randn_like(rest)
+    assert float(_edge_ratios(limiter, stretched).max()) > 1.2
+    velocities = torch.zeros_like(rest)
+    projected, new_velocities = limiter(stretched, velocities)
+    ratios = _edge_ratios(limiter, projected)
+    assert float(ratios.max()) < 1.03 and float(ratios.min()) > 0.96  # from up to 40 % stretch
+    torch.testing.assert_close(new_velocities, projected - stretched)  # the move is kept as velocity
+
+
+def test_pinned_vertices_do_not_move_and_in_band_cloth_is_untouched():
+    rest, faces = _grid()
+    pinned = torch.zeros(len(rest), dtype=torch.bool)
+    pinned[:8] = True  # one border row
+    limiter = StrainLimiter.build(rest, faces, torch.full((len(rest),), 1e-4), pinned)
+    pulled = rest.clone()
+    pulled[8:, 0] += 0.05  # everything but the pinned row pulled away from it
+    projected = limiter.project(pulled)
+    torch.testing.assert_close(projected[:8], pulled[:8], atol=0, rtol=0)
+    assert float((projected[8:16, 0] - rest[8:16, 0]).abs().max()) < 0.05  # the next row is pulled back
+    # A rigid motion keeps every edge length: nothing moves.
+    angle = torch.tensor(0.7)
+    rotation = torch.tensor([[angle.cos(), -angle.sin(), 0.0], [angle.sin(), angle.cos(), 0.0], [0.0, 0.0, 1.0]])
+    moved = rest @ rotation.T + torch.tensor([0.3, -0.1, 1.2])
+    torch.testing.assert_close(limiter.project(moved), moved)
+
+
+def test_bad_band_is_refused():
+    rest, faces = _grid(3)
+    with pytest.raises(ValueError, match="compression"):
+        StrainLimiter.build(rest, faces, torch.ones(len(rest)), torch.zeros(len(rest), dtype=torch.bool),
+                            compression=1.5)
+
