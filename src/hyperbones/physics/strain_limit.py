@@ -27,7 +27,7 @@ import torch
 # The teacher's band: woven cloth stretches by a percent or so under its own weight and
 # buckles rather than compresses in-plane.
 STRETCH_LIMIT = 0.01  # an edge may grow to 1.01 l0
-COMPRESSION_LIMIT = 0.03  # and shrink to 0.97 l0: woven cloth buckles rather than compresses
+COMPRESSION_LIMIT = 0.03  # and shrink to 0.97 l0
 LIMIT_ITERATIONS = 40
 
 

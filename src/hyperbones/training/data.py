@@ -28,10 +28,10 @@ from hyperbones.geometry.diffusion import diffuse, diffusion_steps
 from hyperbones.geometry.proximity import BodyProximity, surface_points
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.cloth_graph import GarmentTopology
-from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
 from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.physics.material import Material, sample_material
 from hyperbones.simulate.garments import cache_dir
 from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
