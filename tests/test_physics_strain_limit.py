@@ -3,6 +3,8 @@
 import pytest
 import torch
 
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.material import Material
 from hyperbones.physics.strain_limit import StrainLimiter
 
 
@@ -16,6 +18,12 @@ def _grid(n: int = 8, spacing: float = 0.02) -> tuple[torch.Tensor, torch.Tensor
     return vertices, faces
 
 
+def _edges(vertices: torch.Tensor, faces: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The cloth's unique edges (E,2) and rest lengths (E,), as the teacher's limiter takes them."""
+    cloth = ClothRest.from_mesh(vertices, faces, Material())
+    return cloth.edges, cloth.edge_lengths
+
+
 def _edge_ratios(limiter: StrainLimiter, positions: torch.Tensor) -> torch.Tensor:
     e = limiter.edges
     return (positions[e[:, 1]] - positions[e[:, 0]]).norm(dim=-1) / limiter.rest_lengths
@@ -24,7 +32,7 @@ def _edge_ratios(limiter: StrainLimiter, positions: torch.Tensor) -> torch.Tenso
 def test_stretched_cloth_is_pulled_back_into_the_band():
     rest, faces = _grid()
     pinned = torch.zeros(len(rest), dtype=torch.bool)
-    limiter = StrainLimiter.build(rest, faces, torch.full((len(rest),), 1e-4), pinned, stretch=0.01,
+    limiter = StrainLimiter.build(*_edges(rest, faces), torch.full((len(rest),), 1e-4), pinned, stretch=0.01,
                                   compression=0.03, iterations=200)
     torch.manual_seed(0)
     stretched = rest * torch.tensor([1.3, 1.0, 1.0]) + 0.002 * torch.randn_like(rest)
@@ -40,7 +48,7 @@ def test_pinned_vertices_do_not_move_and_in_band_cloth_is_untouched():
     rest, faces = _grid()
     pinned = torch.zeros(len(rest), dtype=torch.bool)
     pinned[:8] = True  # one border row
-    limiter = StrainLimiter.build(rest, faces, torch.full((len(rest),), 1e-4), pinned)
+    limiter = StrainLimiter.build(*_edges(rest, faces), torch.full((len(rest),), 1e-4), pinned)
     pulled = rest.clone()
     pulled[8:, 0] += 0.05  # everything but the pinned row pulled away from it
     projected = limiter.project(pulled)
@@ -56,6 +64,6 @@ def test_pinned_vertices_do_not_move_and_in_band_cloth_is_untouched():
 def test_bad_band_is_refused():
     rest, faces = _grid(3)
     with pytest.raises(ValueError, match="compression"):
-        StrainLimiter.build(rest, faces, torch.ones(len(rest)), torch.zeros(len(rest), dtype=torch.bool),
+        StrainLimiter.build(*_edges(rest, faces), torch.ones(len(rest)), torch.zeros(len(rest), dtype=torch.bool),
                             compression=1.5)
 

@@ -48,27 +48,24 @@ class StrainLimiter:
     iterations: int = LIMIT_ITERATIONS
 
     @classmethod
-    def build(cls, rest_vertices: torch.Tensor, faces: torch.Tensor, masses: torch.Tensor, pinned_mask: torch.Tensor,
+    def build(cls, edges: torch.Tensor, rest_lengths: torch.Tensor, masses: torch.Tensor, pinned_mask: torch.Tensor,
               stretch: float = STRETCH_LIMIT, compression: float = COMPRESSION_LIMIT,
               iterations: int = LIMIT_ITERATIONS) -> "StrainLimiter":
-        """rest_vertices (V,3), faces (F,3), masses (V,) kg, pinned_mask (V,) bool."""
+        """edges (E,2) unique undirected, rest_lengths (E,) m, masses (V,) kg, pinned_mask (V,) bool."""
         if not (stretch >= 0 and 0 <= compression < 1 and iterations >= 0):
             raise ValueError(f"strain limits need stretch >= 0, 0 <= compression < 1 and iterations >= 0; "
                              f"got {stretch}, {compression}, {iterations}")
-        pairs = torch.cat([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]).sort(dim=1).values
-        edges = torch.unique(pairs, dim=0)
-        rest_lengths = (rest_vertices[edges[:, 1]] - rest_vertices[edges[:, 0]]).norm(dim=-1)
         inverse_masses = torch.where(pinned_mask, torch.zeros_like(masses), 1.0 / masses.clamp_min(1e-12))
-        counts = torch.zeros(len(rest_vertices), dtype=torch.float32, device=rest_vertices.device)
+        counts = torch.zeros(len(masses), dtype=torch.float32, device=masses.device)
         counts.index_add_(0, edges.reshape(-1), torch.ones(edges.numel(), device=counts.device))
         return cls(edges, rest_lengths.float(), inverse_masses.float(), counts.clamp_min(1.0),
                    float(stretch), float(compression), int(iterations))
 
     @classmethod
-    def for_topology(cls, topology) -> "StrainLimiter":
-        """The teacher's limiter for a ``models.cloth_graph.GarmentTopology`` (its rest shape,
-        masses and pins), with the module's band."""
-        return cls.build(topology.rest_vertices, topology.faces, topology.masses, topology.pinned_mask)
+    def for_cloth(cls, rest, pinned_mask: torch.Tensor) -> "StrainLimiter":
+        """The teacher's limiter for a garment: a ``physics.cloth.ClothRest`` (its edges, rest
+        lengths and vertex masses) and its (V,) pinned mask, with the module's band."""
+        return cls.build(rest.edges, rest.edge_lengths, rest.vertex_masses, pinned_mask)
 
     def to(self, device: torch.device | str) -> "StrainLimiter":
         return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),

@@ -51,7 +51,7 @@ class TeacherMethod:
         self.rest = rest.to(self.device)
         self.topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
                                               material).to(self.device)
-        self.limiter = StrainLimiter.for_topology(self.topology)
+        self.limiter = StrainLimiter.for_cloth(self.rest, self.topology.pinned_mask)
         self.canonical = garment.vertices
         self.skin_weights = garment_skin_weights(garment, body)
         self.body_faces = body.faces.to(self.device)

@@ -122,7 +122,7 @@ class Identity:
               skin_weights: torch.Tensor, material: Material) -> "Identity":
         rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
         topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
-        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_topology(topology))
+        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask))
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
         """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""

@@ -5,8 +5,9 @@ between steps (HOOD): an episode starts from the LBS-posed garment plus noise (c
 LBS put inside the body pushed out to the collision margin), takes one
 long settling step with the body held still, then follows the motion for a rollout whose
 length grows from ``rollout_start`` to ``rollout_max`` steps over training. The loss is
-taken on each raw prediction; the state carried to the next step then gets the same hard
-contact as the runtime (``resolve_contact``), so training sees the states inference does.
+taken on each raw prediction; the state carried to the next step then gets the same strain
+limiting and hard contact as the runtime (``physics.strain_limit``, ``resolve_contact``), so
+training sees the states inference does.
 
 Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
 CPU, NCCL on CUDA with one GPU per process, gloo when processes share GPUs); each rank
@@ -105,6 +106,7 @@ class TeacherTrainer:
         self._episode: Episode | None = None
         self._k = 0
         self._state = None
+        self._limiter = None  # the episode's strain limiter, on this rank's device
 
     def _join_device(self) -> str:
         """This rank's device and the process-group backend: NCCL with one GPU per process;
@@ -142,6 +144,7 @@ class TeacherTrainer:
             nearest = self.proximity.query(start, max_distance=QUERY_DISTANCE)
             start = push_outside(start, nearest, COLLISION_EPSILON, movable=~pinned)
             self._state = (start, torch.zeros_like(lbs))
+            self._limiter = self._episode.identity.limiter.to(self.device)
             self._k = -1  # the settling step first
         episode = self._episode
         identity = episode.identity
@@ -176,8 +179,7 @@ class TeacherTrainer:
         if torch.isfinite(positions_next).all():
             # The loss saw the raw prediction; the state carried on gets the runtime's strain
             # limiting and hard contact.
-            positions_next, velocities_next = identity.limiter.to(self.device)(positions_next.detach(),
-                                                                               velocities_next.detach())
+            positions_next, velocities_next = self._limiter(positions_next.detach(), velocities_next.detach())
             self.proximity.update(body_next)
             positions_next, velocities_next = resolve_contact(
                 positions_next, velocities_next, self.proximity.query(positions_next, max_distance=QUERY_DISTANCE),
