@@ -8,7 +8,7 @@ from conftest import cmu_clip
 from hyperbones.body.skeleton import AXIAL_SEGMENTS, JOINT_INDEX, LIMB_SEGMENTS
 from hyperbones.motion.bvh import bvh_forward_kinematics, read_bvh
 from hyperbones.motion.ground import foot_slip_per_step
-from hyperbones.motion.load import load_motion
+from hyperbones.motion.load import capture_rate, load_motion
 
 # Clip -> (what it is, real capture rate when the header is wrong).
 CLIPS = {
@@ -16,7 +16,7 @@ CLIPS = {
     "02_03": "run", "16_35": "run", "16_07": "forward jump", "143_06": "jumps in place",
     "05_06": "dance, pirouettes", "74_06": "kick", "111_10": "get up from chair", "01_01": "playground",
 }
-SOURCE_FPS = {"74_06": 60.0}
+SOURCE_FPS = {"74_06": 60.0, "143_06": 60.0}  # as configs/teacher*.toml say
 WALKS = ["02_01", "16_21", "16_27", "69_53"]
 
 
@@ -86,6 +86,29 @@ def test_root_path_scaled_to_leg_length_and_resampled(retargeted, body):
     actor_travel = np.linalg.norm((positions[-1, 0] - positions[1, 0])[[0, 2]]) * 0.056444
     travel = float((motion.root_translation[-1, :2] - motion.root_translation[0, :2]).norm())
     assert 0.6 * actor_travel < travel < 1.6 * actor_travel
+
+
+@pytest.mark.parametrize("name", ["16_07", "143_06"])
+def test_jumps_fall_at_about_one_g(retargeted, name):
+    """At the top of each jump the body is in free fall: its root's vertical path curves at
+    about g (scaled by the leg-length ratio) only when the clip plays at its real capture rate."""
+    _, motion, _ = retargeted[name]
+    height = motion.root_translation[:, 2].double().numpy()
+    dt = 1.0 / motion.fps
+    apexes = [i for i in range(3, len(height) - 3)
+              if height[i] == height[i - 3:i + 4].max() and height[i] > np.median(height) + 0.1]
+    assert apexes, "no jump found"
+    for i in apexes:
+        curvature = np.polyfit(np.arange(-2, 3) * dt, height[i - 2:i + 3], 2)[0] * 2
+        assert -1.5 * 9.81 < curvature < -0.5 * 9.81, (i, curvature / 9.81)
+
+
+def test_capture_rate_is_looked_up_by_clip_stem():
+    rates = {"143_06": 60.0, "walk": 60.0}
+    assert capture_rate("../shared/data/mocap/cmu/143_06.bvh", rates) == 60.0
+    assert capture_rate("clips/16_21.bvh", rates) is None  # the header's rate
+    assert capture_rate("walk", rates) is None  # built-in motions have no capture rate
+    assert capture_rate("x/143_06.bvh", None) is None
 
 
 @pytest.mark.parametrize("name", WALKS)

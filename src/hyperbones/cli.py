@@ -114,7 +114,7 @@ def cmd_simulate(args) -> int:
     result = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
                             vertices=args.vertices, piece=args.piece, material=args.material,
                             blend_in=args.blend_in, hold=args.hold, checkpoint=args.checkpoint, device=args.device,
-                            progress=not args.quiet)
+                            source_fps=args.source_fps, progress=not args.quiet)
     paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet)
     _print_run(result, paths)
     return 0
@@ -158,7 +158,7 @@ def cmd_eval(args) -> int:
     bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
     report = evaluate(split(args.methods), split(args.garments), split(args.motions), bodies, args.out,
                       frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
-                      device=args.device, progress=not args.quiet)
+                      device=args.device, source_fps=dict(args.source_fps or []), progress=not args.quiet)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
     return 0
@@ -211,7 +211,7 @@ def cmd_check_teacher(args) -> int:
     split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
     garments = split(args.garments)
     common = dict(vertices=args.vertices, body=args.body, checkpoint=args.checkpoint, device=args.device,
-                  progress=not args.quiet)
+                  source_fps=dict(args.source_fps or []), progress=not args.quiet)
     print(stability_table(args.method, garments, split(args.motions), frames=args.frames, **common))
     print()
     print(settling_table(args.method, garments, args.settle_motion, hold=args.hold, **common))
@@ -224,6 +224,12 @@ def _source_fps_pair(text: str):
         return name, float(value)
     except ValueError:
         raise argparse.ArgumentTypeError(f"expected CLIP=FPS, got {text!r}") from None
+
+
+def _add_source_fps_pairs(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--source-fps", type=_source_fps_pair, action="append", metavar="CLIP=FPS",
+                        help="real capture rate of a BVH clip (by file stem) whose header is wrong, e.g. 74_06=60 "
+                             "(repeatable; CMU 74_06 and 143_06 are 60 fps captures with 120 fps headers)")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -256,8 +262,7 @@ def build_parser() -> argparse.ArgumentParser:
     check = sub.add_parser("check-retarget", help="tables of retarget fidelity and foot slip for BVH clips")
     check.add_argument("bvh", nargs="+", help="CMU .bvh files")
     check.add_argument("--body", default=None, help=BODY_HELP)
-    check.add_argument("--source-fps", type=_source_fps_pair, action="append", metavar="CLIP=FPS",
-                       help="capture rate of a clip whose header is wrong, e.g. 74_06=60 (repeatable)")
+    _add_source_fps_pairs(check)
     check.set_defaults(func=cmd_check_retarget)
 
     simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
@@ -279,6 +284,8 @@ def build_parser() -> argparse.ArgumentParser:
                           help="cloth: mu, lambda (Pa), thickness (m), density (kg/m2), bending, e.g. 'mu=30000'")
     simulate.add_argument("--blend-in", type=int, default=15, metavar="N", help="A-pose transition frames (default 15)")
     simulate.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended to the motion")
+    simulate.add_argument("--source-fps", type=float, default=None,
+                          help="BVH only: the real capture rate when the header is wrong (CMU 74_06, 143_06: 60)")
     simulate.add_argument("--obj", action="store_true", help="also write an OBJ per frame into DIR/obj/")
     simulate.add_argument("--no-preview", action="store_true", help="skip the preview video")
     simulate.add_argument("--quiet", action="store_true", help="no progress bars")
@@ -296,6 +303,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--frames", type=int, default=None, help="only the first N frames of each motion")
     evaluation.add_argument("--vertices", type=int, default=None, help="template resolution")
     evaluation.add_argument("--out", required=True, help="output folder")
+    _add_source_fps_pairs(evaluation)
     evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
     evaluation.set_defaults(func=cmd_eval)
 
@@ -346,6 +354,7 @@ def build_parser() -> argparse.ArgumentParser:
     check_teacher.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
     check_teacher.add_argument("--body", default=None, help=BODY_HELP)
     check_teacher.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    _add_source_fps_pairs(check_teacher)
     check_teacher.add_argument("--quiet", action="store_true", help="no progress bars")
     check_teacher.set_defaults(func=cmd_check_teacher)
 

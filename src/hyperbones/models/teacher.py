@@ -15,7 +15,6 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from hyperbones.geometry.proximity import push_outside
 from hyperbones.models.cloth_graph import EDGE_FEATURES, NODE_FEATURES, ClothGraph
 from hyperbones.models.mgn import EdgeSet, MeshGraphNet, mlp
 from hyperbones.models.normalizer import Normalizer
@@ -68,20 +67,6 @@ def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: t
     positions_next = torch.where(pinned, pinned_next, positions_next)
     velocities_next = torch.where(pinned, pinned_next - positions, velocities_next)
     return positions_next, velocities_next
-
-
-def resolve_contact(positions: torch.Tensor, velocities: torch.Tensor, nearest, movable: torch.Tensor,
-                    margin: float) -> tuple[torch.Tensor, torch.Tensor]:
-    """Hard contact after a step: (V,3) ×2, ``BodyProximity.query(positions)`` on the body at
-    the same time, (V,) bool -> positions and velocities.
-
-    Movable vertices inside the body go to ``margin`` outside their nearest skin point, and
-    their velocity (per-step displacement) takes the push, as in position-based dynamics:
-    cloth that a limb reached moves on with the limb instead of carrying the penetration
-    into the next step, where the one-sided collision term may push it out on the wrong side.
-    """
-    pushed = push_outside(positions, nearest, margin, movable=movable & (nearest.signed_distance < 0))
-    return pushed, velocities + (pushed - positions)
 
 
 def teacher_step(model: nn.Module, topology, rest, positions: torch.Tensor, velocities: torch.Tensor,

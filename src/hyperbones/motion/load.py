@@ -52,3 +52,9 @@ def load_motion(
     if hold < 0:
         raise ParameterError(f"--hold must be >= 0, got {hold}")
     return motion.blend_in(blend_in, body.rest_root).with_hold(int(round(hold * fps)))
+
+
+def capture_rate(source: str, rates: dict[str, float] | None) -> float | None:
+    """The real capture rate ``rates`` gives a motion by its file stem (e.g. ``{"74_06": 60}``
+    for ``.../74_06.bvh``), or None: the header's rate (or a built-in motion)."""
+    return (rates or {}).get(Path(source).stem) if source.lower().endswith(".bvh") else None

@@ -55,11 +55,12 @@ class SimulationResult:
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
                    blend_in: int = 15, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
-                   progress: bool = False) -> SimulationResult:
+                   source_fps: float | None = None, progress: bool = False) -> SimulationResult:
     """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
 
     ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
-    CUDA when present) apply to the learnt methods; LBS ignores them.
+    CUDA when present) apply to the learnt methods; LBS ignores them. ``source_fps`` is the
+    real capture rate of a BVH clip whose header is wrong.
     """
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
@@ -67,7 +68,7 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
         raise ParameterError(f"--frames must be >= 1, got {frames}")
     shape = BodyShape.parse(body)
     the_body = body_for(shape)
-    the_motion = load_motion(motion, the_body, blend_in=blend_in, hold=hold)
+    the_motion = load_motion(motion, the_body, blend_in=blend_in, hold=hold, source_fps=source_fps)
     if frames is not None:
         the_motion = the_motion.slice(0, frames)
     cloth = Material.parse(material)

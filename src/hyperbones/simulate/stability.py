@@ -15,7 +15,7 @@ from tqdm import tqdm
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
-from hyperbones.motion.load import load_motion
+from hyperbones.motion.load import capture_rate, load_motion
 from hyperbones.simulate.evaluation import kinetic_energy
 from hyperbones.simulate.pipeline import run_simulation
 
@@ -24,16 +24,17 @@ RUNAWAY_SPEED = 15.0  # m/s: faster than any body part in the clips (a kick's fo
 
 def stability_table(method: str, garments: list[str], motions: list[str], *, frames: int = 1000,
                     vertices: int | None = None, body: str | None = None, checkpoint: str | None = None,
-                    device: str = "auto", progress: bool = True) -> str:
+                    device: str = "auto", source_fps: dict[str, float] | None = None, progress: bool = True) -> str:
     the_body = body_for(BodyShape.parse(body))
     rows = ["| garment | motion | frames | finite | max speed m/s | runaway | KE last frame J | ε_c % | ε_e % |",
             "|---|---|---:|---|---:|---|---:|---:|---:|"]
     for garment in tqdm(garments, desc="stability", disable=not progress):
         for motion in motions:
-            length = load_motion(motion, the_body).num_frames
+            rate = capture_rate(motion, source_fps)
+            length = load_motion(motion, the_body, source_fps=rate).num_frames
             hold = max(0, frames - length) / 30.0
             result = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices, hold=hold,
-                                    checkpoint=checkpoint, device=device)
+                                    checkpoint=checkpoint, device=device, source_fps=rate)
             m = result.metrics
             energy = kinetic_energy(result.garment_vertices.double(), result.vertex_masses, 1.0 / result.fps)
             rows.append(f"| {garment} | {m['motion']} | {m['frames']} | {m['finite']} | {m['max_speed']:.2f} | "
@@ -44,14 +45,15 @@ def stability_table(method: str, garments: list[str], motions: list[str], *, fra
 
 def settling_table(method: str, garments: list[str], motion: str = "walk", *, hold: float = 3.0,
                    vertices: int | None = None, body: str | None = None, checkpoint: str | None = None,
-                   device: str = "auto", progress: bool = True) -> str:
+                   device: str = "auto", source_fps: dict[str, float] | None = None, progress: bool = True) -> str:
     the_body = body_for(BodyShape.parse(body))
-    stop = load_motion(motion, the_body).num_frames - 1  # the last moving frame
+    rate = capture_rate(motion, source_fps)
+    stop = load_motion(motion, the_body, source_fps=rate).num_frames - 1  # the last moving frame
     rows = [f"Kinetic energy (J) of the garment after the body stops ({motion} + {hold:g} s hold).", "",
             "| garment | at stop | +0.5 s | +1 s | +2 s | +2 s / at stop |", "|---|---:|---:|---:|---:|---:|"]
     for garment in tqdm(garments, desc="settling", disable=not progress):
         result = run_simulation(method, garment, motion, body, vertices=vertices, hold=hold, checkpoint=checkpoint,
-                                device=device)
+                                device=device, source_fps=rate)
         energy = kinetic_energy(result.garment_vertices.double(), result.vertex_masses, 1.0 / result.fps)
         fps = result.fps
         at = [float(energy[min(len(energy) - 1, stop - 1 + int(round(s * fps)))]) for s in (0.0, 0.5, 1.0, 2.0)]

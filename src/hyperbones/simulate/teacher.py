@@ -4,9 +4,9 @@ Frame 0 is the draped garment skinned to the first pose (any cloth inside the bo
 out to the collision margin), relaxed by one long settling step with the body held still,
 as every training episode starts; each later frame is one teacher step. Pinned vertices
 follow the body by LBS. After every step, as in training, strain limiting keeps each edge
-within a narrow band of its rest length (``physics.strain_limit``), then cloth that ended
-inside the body is moved out to the collision margin (``resolve_contact``); both keep
-their moves as velocity.
+within a narrow band of its rest length while cloth that ended inside the body goes back
+out on the side of the skin it came from (``physics.contact.constrain_step``); the moves
+are kept as velocity.
 """
 
 from __future__ import annotations
@@ -23,8 +23,9 @@ from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT, GarmentTopology
-from hyperbones.models.teacher import resolve_contact, teacher_step
+from hyperbones.models.teacher import teacher_step
 from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
 from hyperbones.physics.strain_limit import StrainLimiter
@@ -82,11 +83,8 @@ class TeacherMethod:
             positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)
-            positions, velocities = self.limiter(positions, velocities)
-            proximity.update(body_next)
-            positions, velocities = resolve_contact(positions, velocities,
-                                                    proximity.query(positions, max_distance=QUERY_DISTANCE),
-                                                    ~self.topology.pinned_mask, COLLISION_EPSILON)
+            positions, velocities = constrain_step(positions, velocities, self.limiter, proximity, nearest, body_next,
+                                                   ~self.topology.pinned_mask, COLLISION_EPSILON, QUERY_DISTANCE)
             if t == 0:
                 velocities = torch.zeros_like(velocities)  # the first pose is held still before it
             yield positions

@@ -40,7 +40,7 @@ class DataConfig:
     mocap_dir: str = "../shared/data/mocap/cmu"
     train_clips: tuple[str, ...] = ("01_01", "02_01", "02_03", "05_06", "111_10", "16_07", "16_27", "69_53", "74_06")
     test_clips: tuple[str, ...] = ("16_21", "16_35", "143_06")
-    source_fps: dict[str, float] = field(default_factory=lambda: {"74_06": 60.0})
+    source_fps: dict[str, float] = field(default_factory=lambda: {"74_06": 60.0, "143_06": 60.0})
     builtins: tuple[str, ...] = ("walk", "run", "jump", "turn", "idle", "arm-swing", "sit")
     test_bodies: tuple[str, ...] = ("gender=0.3,age=0.6,muscle=0.7,weight=0.3,height=0.6,proportions=0.4",
                                     "gender=0.8,age=0.4,muscle=0.3,weight=0.8,height=0.3,proportions=0.6")

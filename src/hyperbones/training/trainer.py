@@ -6,7 +6,7 @@ LBS put inside the body pushed out to the collision margin), takes one
 long settling step with the body held still, then follows the motion for a rollout whose
 length grows from ``rollout_start`` to ``rollout_max`` steps over training. The loss is
 taken on each raw prediction; the state carried to the next step then gets the same strain
-limiting and hard contact as the runtime (``physics.strain_limit``, ``resolve_contact``), so
+limiting and hard contact as the runtime (``physics.contact.constrain_step``), so
 training sees the states inference does.
 
 Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
@@ -29,10 +29,11 @@ from tqdm import tqdm
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity, push_outside
-from hyperbones.models.teacher import Teacher, TrunkConfig, resolve_contact, teacher_step
+from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
 from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
+from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.training.loss import collision_weight_at, physics_terms
 
@@ -179,11 +180,9 @@ class TeacherTrainer:
         if torch.isfinite(positions_next).all():
             # The loss saw the raw prediction; the state carried on gets the runtime's strain
             # limiting and hard contact.
-            positions_next, velocities_next = self._limiter(positions_next.detach(), velocities_next.detach())
-            self.proximity.update(body_next)
-            positions_next, velocities_next = resolve_contact(
-                positions_next, velocities_next, self.proximity.query(positions_next, max_distance=QUERY_DISTANCE),
-                ~identity.topology.pinned_mask.to(self.device), COLLISION_EPSILON)
+            positions_next, velocities_next = constrain_step(
+                positions_next.detach(), velocities_next.detach(), self._limiter, self.proximity, nearest, body_next,
+                ~topology.pinned_mask, COLLISION_EPSILON, QUERY_DISTANCE)
             if self._k == 0:
                 # After settling, the garment moves with the body's LBS velocity at the first frame.
                 velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)

@@ -1,0 +1,78 @@
+"""Hard contact after a teacher step, on the real body: cloth goes back out on the side of the
+skin it came from, inside the strain limiter's sweeps; pinned cloth stays; moves become velocity."""
+
+import torch
+
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.physics.contact import ContactPlanes, constrain_step
+from hyperbones.physics.strain_limit import StrainLimiter
+
+MARGIN = 2e-3
+
+
+def _chest_patch(body, proximity):
+    """A small triangle 5 mm in front of the chest: (3,3) positions, (3,) skin normals, its limiter."""
+    v = body.rest_vertices
+    chest = torch.nonzero((v[:, 2] > 1.15) & (v[:, 2] < 1.3) & (v[:, 0].abs() < 0.03)).squeeze(1)
+    front = chest[v[chest, 1].argmin()] if v[chest, 1].mean() > v[:, 1].mean() else chest[v[chest, 1].argmax()]
+    skin = v[front]
+    normal = proximity.query(skin[None], max_distance=0.1).normal[0]
+    side = torch.linalg.cross(normal, torch.tensor([0.0, 0.0, 1.0]))
+    side = side / side.norm()
+    positions = skin + 0.005 * normal + 0.01 * torch.stack([torch.zeros(3), side, torch.tensor([0.0, 0.0, 1.0])])
+    edges = torch.tensor([[0, 1], [1, 2], [0, 2]])
+    rest_lengths = (positions[edges[:, 1]] - positions[edges[:, 0]]).norm(dim=-1)
+    return positions, normal, edges, rest_lengths
+
+
+def test_a_deep_sweep_puts_cloth_back_on_the_side_it_came_from(body):
+    """The chest moves 15 cm forward in one step through cloth 5 mm in front of it: a push to
+    the nearest skin point would send the cloth out of the back; the tracked face keeps it in front."""
+    proximity = BodyProximity(body.faces)
+    proximity.update(body.rest_vertices)
+    positions, normal, edges, rest_lengths = _chest_patch(body, proximity)
+    limiter = StrainLimiter.build(edges, rest_lengths, torch.full((3,), 1e-3), torch.zeros(3, dtype=torch.bool))
+    nearest_before = proximity.query(positions, max_distance=0.1)
+    assert (nearest_before.signed_distance > 0).all()
+    sweep = 0.15 * normal
+    body_after = body.rest_vertices + sweep
+    velocities = torch.zeros_like(positions)
+    inside_after = BodyProximity(body.faces)
+    inside_after.update(body_after)
+    deep = inside_after.query(positions, max_distance=0.2)
+    assert (deep.signed_distance < -0.02).all()  # inside, and nearest to the back of the chest:
+    assert ((deep.normal * normal).sum(-1) < 0).all()  # a nearest-point push would go out of the back
+    moved, moved_velocities = constrain_step(positions, velocities, limiter, proximity, nearest_before, body_after,
+                                             torch.ones(3, dtype=torch.bool), MARGIN, 0.2)
+    along = ((moved - positions) * normal).sum(-1)
+    torch.testing.assert_close(along, torch.full((3,), 0.15 + 0.0), atol=0.01, rtol=0)  # carried forward
+    after = proximity.query(moved, max_distance=0.1).signed_distance  # the BVH now holds body_after
+    assert (after > 0).all() and (after < 0.01).all()
+    torch.testing.assert_close(moved_velocities, velocities + (moved - positions))  # the move is velocity
+
+
+def test_pinned_cloth_stays_and_cloth_outside_is_left_alone(body):
+    proximity = BodyProximity(body.faces)
+    proximity.update(body.rest_vertices)
+    positions, normal, edges, rest_lengths = _chest_patch(body, proximity)
+    movable = torch.tensor([False, True, True])
+    limiter = StrainLimiter.build(edges, rest_lengths, torch.full((3,), 1e-3), ~movable)
+    nearest_before = proximity.query(positions, max_distance=0.1)
+    body_after = body.rest_vertices + 0.02 * normal  # 2 cm forward: the cloth ends 1.5 cm inside
+    moved, _ = constrain_step(positions, torch.zeros_like(positions), limiter, proximity, nearest_before, body_after,
+                              movable, MARGIN, 0.1)
+    torch.testing.assert_close(moved[0], positions[0], atol=0, rtol=0)
+    assert (proximity.query(moved[1:], max_distance=0.1).signed_distance > 0).all()  # the rest went out
+    # Cloth already outside and inside its band is not touched (the body stays where it is).
+    proximity.update(body.rest_vertices)
+    kept, _ = constrain_step(positions, torch.zeros_like(positions), limiter, proximity, nearest_before,
+                             body.rest_vertices, torch.ones(3, dtype=torch.bool), MARGIN, 0.1)
+    torch.testing.assert_close(kept, positions, atol=0, rtol=0)
+
+
+def test_planes_only_push_outwards():
+    planes = ContactPlanes(torch.tensor([0, 2]), torch.zeros(2, 3), torch.tensor([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]))
+    points = torch.tensor([[0.3, 0.1, -0.02], [5.0, 5.0, -5.0], [-0.01, 0.4, 0.2]])
+    projected = planes.project(points)
+    torch.testing.assert_close(projected, torch.tensor([[0.3, 0.1, 0.0], [5.0, 5.0, -5.0], [0.0, 0.4, 0.2]]))
+    torch.testing.assert_close(planes.project(projected), projected)  # on or in front of a plane: kept
