@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import torch
 
 from hyperbones.geometry.proximity import BodyProximity, Nearest, face_planes, push_outside, surface_points
+from hyperbones.physics.strain_limit import StrainLimiter
 
 # Vertices within this distance of the skin before a step keep their face as a contact plane.
 TRACK_REACH = 0.02  # m
@@ -57,13 +58,13 @@ class ContactPlanes:
         return positions.index_add(0, self.vertex, gap.neg().clamp_min(0.0)[:, None] * self.normal)
 
 
-def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter, proximity: BodyProximity,
+def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: StrainLimiter, proximity: BodyProximity,
                    nearest_before: Nearest, body_after: torch.Tensor, movable: torch.Tensor, margin: float,
                    query_distance: float) -> tuple[torch.Tensor, torch.Tensor]:
     """Strain limiting and hard contact after a step; every move is kept as velocity.
 
     positions, velocities: (V,3) the step's raw result (per-step displacement);
-    limiter: a ``StrainLimiter``; proximity: the body's BVH (moved to ``body_after`` (Vb,3)
+    limiter: the garment's strain limiting; proximity: the body's BVH (moved to ``body_after`` (Vb,3)
     here, where it stays for the next step); nearest_before: ``proximity.query`` of the
     positions before the step on the body before it; movable: (V,) bool (not pinned).
     Returns positions, velocities, both (V,3).

@@ -24,8 +24,12 @@ where a pull towards the body met the contact push (dress, 16_21: 2.4-5.1 J agai
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import torch
+
+if TYPE_CHECKING:  # contact imports this module
+    from hyperbones.physics.contact import ContactPlanes
 
 # The teacher's band: woven cloth stretches by a percent or so under its own weight and
 # buckles rather than compresses in-plane.
@@ -74,7 +78,7 @@ class StrainLimiter:
         return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),
                              self.edge_counts.to(device), self.stretch, self.compression, self.iterations)
 
-    def project(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
+    def project(self, positions: torch.Tensor, contact: "ContactPlanes | None" = None) -> torch.Tensor:
         """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps; ``contact`` (a
         ``physics.contact.ContactPlanes``), when given, is enforced after every sweep."""
         first, second = self.edges[:, 0], self.edges[:, 1]
