@@ -13,6 +13,7 @@ from hyperbones.motion.builtin import BUILTINS, builtin_motion
 from hyperbones.motion.ground import sole_points, still_frames
 from hyperbones.motion.bvh import read_bvh
 from hyperbones.motion.fidelity import retarget_report
+from hyperbones.motion.load import capture_rate
 from hyperbones.motion.retarget import retarget_bvh
 
 
@@ -22,14 +23,13 @@ def retarget_tables(paths: list[str], body_text: str | None = None, source_fps: 
     ``source_fps`` maps a clip's file stem to its real capture rate, when its header is wrong.
     """
     body = body_for(BodyShape.parse(body_text))
-    source_fps = source_fps or {}
     fidelity = ["| clip | frames | limbs mean ° | limbs p95 ° | worst limb mean ° | worst limb p95 ° | spine mean ° | "
                 "neck mean ° |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
     slip = ["| clip | steps | slip median cm | slip max cm | slip max cm without foot lock |",
             "|---|---:|---:|---:|---:|"]
     for path in paths:
         stem = Path(path).stem
-        fps = source_fps.get(stem)
+        fps = capture_rate(path, source_fps)
         clip = read_bvh(path)
         motion = retarget_bvh(path, body, source_fps=fps)
         report = retarget_report(motion, body, clip, source_fps=fps)

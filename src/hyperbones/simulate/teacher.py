@@ -53,6 +53,7 @@ class TeacherMethod:
         self.topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
                                               material).to(self.device)
         self.limiter = StrainLimiter.for_cloth(self.rest, self.topology.pinned_mask)
+        self.movable = ~self.topology.pinned_mask
         self.canonical = garment.vertices
         self.skin_weights = garment_skin_weights(garment, body)
         self.body_faces = body.faces.to(self.device)
@@ -73,7 +74,7 @@ class TeacherMethod:
         proximity.update(body[0].to(self.device))
         start = skinned[0].to(self.device)
         positions = push_outside(start, proximity.query(start, max_distance=QUERY_DISTANCE), COLLISION_EPSILON,
-                                 movable=~self.topology.pinned_mask)
+                                 movable=self.movable)
         velocities = torch.zeros_like(positions)
         for t in range(body.shape[0]):
             # Frame 0: settle on the still body; frame t > 0: the step from t-1 to t.
@@ -84,7 +85,7 @@ class TeacherMethod:
                                                  skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
                                                  nearest, self.settle_dt if t == 0 else FRAME_DT)
             positions, velocities = constrain_step(positions, velocities, self.limiter, proximity, nearest, body_next,
-                                                   ~self.topology.pinned_mask, COLLISION_EPSILON, QUERY_DISTANCE)
+                                                   self.movable, COLLISION_EPSILON, QUERY_DISTANCE)
             if t == 0:
                 velocities = torch.zeros_like(velocities)  # the first pose is held still before it
             yield positions

@@ -31,8 +31,8 @@ from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.physics.material import Material, sample_material
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.simulate.garments import cache_dir
 from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
 from hyperbones.training.config import DataConfig

@@ -30,11 +30,11 @@ from tqdm import tqdm
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
+from hyperbones.physics.contact import constrain_step
+from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
-from hyperbones.physics.contact import constrain_step
-from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.training.loss import collision_weight_at, physics_terms
 
 QUERY_DISTANCE = 0.1  # m: nearest body faces are looked for this far out
