@@ -35,6 +35,24 @@ def test_blend_in_starts_in_apose_with_heading_and_is_smooth():
     assert motion.blend_in(0, rest_root) is motion
 
 
+def test_blend_in_arrives_with_the_motions_velocity():
+    """A clip that starts mid-run: the root speeds up from rest to the clip's 3 m/s and a
+    slowly turning joint keeps its 1 rad/s, so the join has no velocity jump."""
+    fps, frames, n = 30.0, 20, 15
+    t = torch.arange(frames) / fps
+    rot = torch.eye(3).repeat(frames, 31, 1, 1)
+    rot[:, 7] = rot_z(1.0 * t)  # joint 7 turns at 1 rad/s about z
+    root = torch.stack([3.0 * t, torch.zeros(frames), torch.full((frames,), 0.95)], -1)
+    out = Motion(rot, root, fps, "run").blend_in(n, torch.tensor([0.0, 0.0, 0.9]))
+    velocity = (out.root_translation[1:] - out.root_translation[:-1]) * fps  # (T-1,3)
+    assert float(velocity[0].norm()) < 0.05  # the A-pose starts from rest (3 m/s later)
+    assert torch.allclose(velocity[n - 1], velocity[n], atol=0.05)  # into the join as out of it
+    acceleration = (velocity[1:] - velocity[:-1]).norm(dim=-1) * fps
+    assert float(acceleration.max()) < 1.6 * 3.0 / (n / fps)  # smoothstep's peak, not a 90 m/s² jolt
+    turn = rotation_angle_deg(out.joint_rotations[1:, 7], out.joint_rotations[:-1, 7]) * fps  # deg/s
+    assert float(turn[n - 1]) == pytest.approx(float(turn[n]), rel=0.05)
+
+
 def test_hold_and_heading():
     motion = _spin().with_hold(4)
     assert torch.equal(motion.joint_rotations[-1], motion.joint_rotations[-5])

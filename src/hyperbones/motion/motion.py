@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, replace
 
+import roma
 import torch
 
 from hyperbones.body.skeleton import NUM_JOINTS
@@ -17,6 +18,7 @@ from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z, slerp_rotmat
 
 DEFAULT_FPS = 30.0
+MAX_BLEND_EXTRAPOLATION = 0.6  # rad: how far a joint's first swing is carried back into the blend-in
 
 
 @dataclass(frozen=True)
@@ -76,24 +78,46 @@ class Motion:
         return replace(self, joint_rotations=rot, root_translation=root)
 
     def blend_in(self, num_frames: int, rest_root: torch.Tensor) -> "Motion":
-        """Prepend a transition from the A-pose to the first frame over ``num_frames`` frames.
+        """Prepend a transition from the still A-pose into the first frame over ``num_frames`` frames.
 
-        The A-pose starts where the motion starts, with its heading, and with its root at the
-        canonical height ``rest_root[2]``, so a garment draped on the canonical body can start
-        from a rigid move of its drape. With 0 frames the motion is returned unchanged.
+        The A-pose takes the motion's first heading and the canonical root height
+        ``rest_root[2]``, so a garment draped on the canonical body can start from a rigid
+        move of its drape. The transition arrives at the first frame with the motion's own
+        velocity, so nothing is kicked at the join (a clip that starts mid-run used to go from
+        standing to 3.5 m/s in one frame, a ~10 g jolt that outweighed the rest of the clip in
+        per-frame inertia):
+
+        - the root accelerates from rest along the first frame's velocity v0 with speed
+          v0·w(s) (w the smoothstep, s from 0 to 1 over the transition), so the A-pose stands
+          v0·D/2 behind the first frame's root (D the transition's duration);
+        - each joint's rotation is slerped (weight w) from the A-pose to the first frame's
+          rotation carried back along the joint's first angular velocity; that extrapolation
+          is capped at ``MAX_BLEND_EXTRAPOLATION`` radians, so a fast-swinging limb keeps part
+          of its velocity jump rather than turning through a half circle before the join.
+
+        With 0 frames the motion is returned unchanged.
         """
         if num_frames <= 0:
             return self
-        first_rot = self.joint_rotations[0]
-        yaw = heading_angle(first_rot[0])
-        start_rot = rot_z(yaw).expand(NUM_JOINTS, 3, 3)
-        start_root = self.root_translation[0].clone()
+        duration = num_frames / self.fps
+        first_rot, first_root = self.joint_rotations[0], self.root_translation[0]
+        if self.num_frames > 1:
+            root_velocity = (self.root_translation[1] - first_root) * self.fps  # (3,) m/s
+            spin = roma.rotmat_to_rotvec(self.joint_rotations[1] @ first_rot.transpose(-1, -2)) * self.fps  # (31,3)
+        else:
+            root_velocity, spin = torch.zeros(3), torch.zeros(NUM_JOINTS, 3)
+        speed = spin.norm(dim=-1, keepdim=True)
+        spin = spin * (2 * MAX_BLEND_EXTRAPOLATION / (duration * speed).clamp_min(2 * MAX_BLEND_EXTRAPOLATION))
+        s = torch.arange(num_frames, dtype=torch.float32) / num_frames  # (n,)
+        w = s * s * (3 - 2 * s)  # smoothstep: zero velocity at both ends
+        ramp = (s ** 3 - s ** 4 / 2)[:, None]  # ∫_0^s w: distance covered at speed v0·w, ½ at s = 1
+        start_rot = rot_z(heading_angle(first_rot[0])).expand(NUM_JOINTS, 3, 3)
+        carried_back = roma.rotvec_to_rotmat(spin * duration * (ramp[:, :, None] - 0.5)) @ first_rot  # (n,31,3,3)
+        rot = slerp_rotmat(start_rot.unsqueeze(0), carried_back, w[:, None].expand(-1, NUM_JOINTS))
+        arrival = first_root - root_velocity * duration / 2  # where the root would be without the run-up
+        start_root = arrival.clone()
         start_root[2] = rest_root[2]
-        # Smoothstep weights: zero velocity at both ends, so nothing jerks at the joins.
-        s = torch.arange(num_frames, dtype=torch.float32) / num_frames
-        w = s * s * (3 - 2 * s)
-        rot = slerp_rotmat(start_rot.unsqueeze(0), first_rot.unsqueeze(0), w[:, None].expand(-1, NUM_JOINTS))
-        root = start_root + w[:, None] * (self.root_translation[0] - start_root)
+        root = start_root + w[:, None] * (arrival - start_root) + root_velocity * duration * ramp
         return replace(self, joint_rotations=torch.cat([rot, self.joint_rotations]),
                        root_translation=torch.cat([root, self.root_translation]))
 

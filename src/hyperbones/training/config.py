@@ -33,6 +33,10 @@ class DataConfig:
         draw μ, λ, k_b, ρ over HOOD's ranges.
     start_noise: std (m) of the noise added to the LBS start; settle_dt: length (s) of the
         first step of an episode, taken with the body held still.
+    airborne_fraction: share of episodes whose root gets free-fall hops added on top of
+        the clip (``training.data.ballistic_hops``), launched at ``hop_speeds`` (m/s, a
+        range): the clips hold a few tenths of a second of flight, too little to learn
+        that cloth falls at g once the body drops away from it.
     """
 
     templates: tuple[str, ...] = TEMPLATE_NAMES
@@ -49,6 +53,8 @@ class DataConfig:
     default_material_fraction: float = 0.5
     start_noise: float = 0.001
     settle_dt: float = 1.0 / 3.0
+    airborne_fraction: float = 0.0
+    hop_speeds: tuple[float, float] = (0.8, 2.2)
 
 
 @dataclass(frozen=True)

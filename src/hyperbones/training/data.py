@@ -31,6 +31,7 @@ from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
 from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.energies import GRAVITY
 from hyperbones.physics.material import Material, sample_material
 from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.simulate.garments import cache_dir
@@ -147,6 +148,30 @@ class Episode:
         return self.body_vertices.shape[0] - 2
 
 
+def ballistic_hops(num_frames: int, fps: float, rng: random.Random,
+                   speeds: tuple[float, float] = (0.8, 2.2)) -> torch.Tensor:
+    """(num_frames,) heights (m) of hops in free fall, to add to a clip's root.
+
+    Hops follow one another after random pauses (0.2–0.6 s; the first after 0–0.5 s): each
+    leaves the ground at a speed drawn from ``speeds`` and flies a parabola under gravity
+    back to height 0. The path is then smoothed by a 5-frame binomial kernel, which spreads
+    take-off and landing over ~0.15 s (2–3 g, as in the CMU jumps) and leaves the flight's
+    curvature at exactly −g.
+    """
+    heights = torch.zeros(num_frames + 4, dtype=torch.float64)  # 2 frames of padding each side
+    dt = 1.0 / fps
+    frame = 2 + int(rng.uniform(0.0, 0.5) * fps)
+    while frame < num_frames + 2:
+        speed = rng.uniform(*speeds)
+        flight = int(2 * speed / GRAVITY * fps)
+        tau = torch.arange(1, flight + 1, dtype=torch.float64) * dt
+        arc = (speed * tau - GRAVITY * tau ** 2 / 2).clamp_min(0.0)[: len(heights) - frame - 1]
+        heights[frame + 1: frame + 1 + len(arc)] = arc
+        frame += 1 + flight + int(rng.uniform(0.2, 0.6) * fps)
+    kernel = torch.tensor([1.0, 4.0, 6.0, 4.0, 1.0], dtype=torch.float64) / 16
+    return torch.nn.functional.conv1d(heights[None, None], kernel[None, None])[0, 0].float()
+
+
 class TeacherData:
     """Samples episodes for training (``split="train"``) from the config's garments and motions."""
 
@@ -202,5 +227,9 @@ class TeacherData:
         start = self.random.randrange(0, motion.num_frames - steps - 1)
         window = motion.slice(start, start + steps + 2)
         scale = identity.body.leg_length / self.default_body.leg_length
-        posed = identity.body.pose(window.joint_rotations, window.root_translation * scale)
+        root = window.root_translation * scale
+        if self.random.random() < self.config.airborne_fraction:
+            root = root.clone()
+            root[:, 2] += ballistic_hops(window.num_frames, window.fps, self.random, self.config.hop_speeds)
+        posed = identity.body.pose(window.joint_rotations, root)
         return Episode(identity, posed.vertices, identity.skin(posed.skinning_transforms), motion.name)
