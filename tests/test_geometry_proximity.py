@@ -3,6 +3,7 @@ import torch
 
 from hyperbones.geometry.proximity import (
     BodyProximity,
+    closest_points_on_faces,
     face_planes,
     is_closed_surface,
     signed_distance,
@@ -143,6 +144,25 @@ def test_collision_energy_from_a_query_penalises_points_inside(sphere, sphere_pr
     energy = collision_energy(points, origin, normal, weight=1.0)
     depth = 2e-3 - signed_distance(points, vertices, faces, nearest.face)[0]
     assert energy.item() == pytest.approx(depth.item() ** 3, rel=1e-9) and depth > 0.02
+
+
+def test_closest_points_on_faces_match_warp_and_a_dense_sampling(sphere, sphere_proximity):
+    vertices, faces = sphere
+    points = shell_points(500, 0.9, 1.1, seed=3)
+    nearest = sphere_proximity.query(points.float(), max_distance=0.5)
+    exact = closest_points_on_faces(points, vertices, faces, nearest.face)
+    assert exact.dtype == F64
+    assert torch.allclose(exact.float(), nearest.point, atol=1e-5)  # Warp's float32 answer
+    # Any triangle, any point: nothing on the triangle is closer (its vertex, edge and face regions).
+    generator = torch.Generator().manual_seed(1)
+    triangle = torch.randn(3, 3, dtype=F64, generator=generator)
+    far = torch.randn(1000, 3, dtype=F64, generator=generator) * 2
+    found = closest_points_on_faces(far, triangle, torch.tensor([[0, 1, 2]]), torch.zeros(1000, dtype=torch.long))
+    u, v = torch.meshgrid(torch.linspace(0, 1, 300, dtype=F64), torch.linspace(0, 1, 300, dtype=F64), indexing="ij")
+    inside = (u + v) <= 1
+    samples = triangle[0] + u[inside, None] * (triangle[1] - triangle[0]) + v[inside, None] * (triangle[2] - triangle[0])
+    gap = (far - found).norm(dim=-1) - torch.cdist(far, samples).min(dim=1).values
+    assert float(gap.max()) < 1e-12 and float(gap.min()) > -0.01  # never farther; as close as the sampling
 
 
 def test_push_outside_moves_only_close_movable_points(sphere_proximity):

@@ -26,7 +26,7 @@ from hyperbones.garment.templates import DEFAULT_VERTICES, TEMPLATES, make_templ
 from hyperbones.io_utils import atomic_path
 from hyperbones.physics.material import Material
 
-CACHE_VERSION = 5
+CACHE_VERSION = 6
 
 
 def cache_dir() -> Path:
