@@ -12,7 +12,7 @@ from hyperbones.errors import ParameterError
 from hyperbones.training.checkpoint import export_weights, load_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.loss import collision_weight_at
-from hyperbones.training.trainer import TeacherTrainer, rollout_length, teacher_from_checkpoint
+from hyperbones.training.trainer import TeacherTrainer, learning_rate_at, rollout_length, teacher_from_checkpoint
 
 TINY = {"model": {"latent": 16, "blocks": 2},
         "data": {"templates": ["tshirt"], "resolutions": [1000], "train_clips": [], "builtins": ["walk"],
@@ -43,6 +43,9 @@ def test_ramps():
     config = TeacherTrainingConfig().train
     assert rollout_length(0, config) == config.rollout_start
     assert rollout_length(10 * config.rollout_ramp_steps, config) == config.rollout_max
+    staircase = TeacherTrainingConfig.from_dict({"train": {"learning_rate": 1e-4, "learning_rate_halve_at": [10, 20]}})
+    assert [learning_rate_at(step, staircase.train) for step in (0, 9, 10, 19, 20, 10**6)] == pytest.approx(
+        [1e-4, 1e-4, 5e-5, 5e-5, 2.5e-5, 2.5e-5])
 
 
 def test_train_steps_checkpoint_and_resume(tmp_path, body):

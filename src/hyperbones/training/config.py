@@ -64,6 +64,7 @@ class TrainConfig:
     init_from: a training checkpoint (path relative to the folder the command runs in) whose
         model weights and input statistics a new run starts from, with a fresh optimiser and
         step 0; its model section must match this config's. Empty: random initialisation.
+    learning_rate_halve_at: steps at which the learning rate halves (a staircase decay).
     ema_decay: the checkpoint also keeps an exponential moving average of the weights with
         this decay per step, and inference loads it (single steps of the one-step physics
         loss move the weights noisily; the average rolls out more steadily). 0: none.
@@ -71,6 +72,7 @@ class TrainConfig:
 
     steps: int = 100_000
     learning_rate: float = 5e-5
+    learning_rate_halve_at: tuple[int, ...] = ()
     grad_clip: float = 1.0
     collision_weight_start: float = 5e3
     collision_weight_end: float = 5e5

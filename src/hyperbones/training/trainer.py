@@ -48,6 +48,11 @@ def pick_device(name: str) -> torch.device:
     return torch.device(name)
 
 
+def learning_rate_at(step: int, config) -> float:
+    """``config.learning_rate`` halved once for each of ``learning_rate_halve_at`` reached."""
+    return config.learning_rate * 0.5 ** sum(step >= milestone for milestone in config.learning_rate_halve_at)
+
+
 def rollout_length(step: int, config) -> int:
     if config.rollout_ramp_steps <= 0:
         return config.rollout_max
@@ -170,6 +175,8 @@ class TeacherTrainer:
         terms = physics_terms(positions_next, positions, velocities, rest, nearest, body_now, body_next,
                               self.body_faces, weight, dt)
         loss = sum(terms.values())
+        for group in self.optimizer.param_groups:
+            group["lr"] = learning_rate_at(self.step, cfg.train)
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
@@ -191,6 +198,7 @@ class TeacherTrainer:
             self._episode = None  # a blown-up episode is dropped; the loss already pushed against it
         logs = {name: float(value.detach()) for name, value in terms.items()}
         logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
+                    learning_rate=learning_rate_at(self.step, cfg.train),
                     rollout=rollout_length(self.step, cfg.train), settle=float(self._k == 0))
         return logs
 
@@ -260,4 +268,4 @@ def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[T
     return model, payload
 
 
-__all__ = ["TeacherTrainer", "teacher_from_checkpoint", "rollout_length"]
+__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "rollout_length"]
