@@ -56,6 +56,7 @@ def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
     (["motion", "walk", "--blend-in", "-3", "--out", "x.npz"], "--blend-in"),
     (["motion", "walk"], "--out FILE.npz is required"),
     (["motion", "missing.bvh", "--out", "x.npz"], "missing.bvh: file not found"),
+    (["check-drape", "--templates", "tshirt,cape"], "unknown template(s) ['cape']"),
 ])
 def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
     monkeypatch.chdir(tmp_path)
@@ -63,6 +64,17 @@ def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
     assert code == 2
     assert err.startswith("hyperbones: error:") and phrase in err and err.count("\n") == 1
     assert not list(tmp_path.iterdir())
+
+
+def test_check_drape_prints_a_row_per_drape(capsys):
+    code, out, _ = _run(capsys, "check-drape", "--templates", "tshirt", "--resolutions", "1500", "--bodies",
+                        "weight=0.7", "--quiet")
+    header, rule, *rows = out.strip().splitlines()
+    assert code == 0 and header.startswith("| garment | vertices | body |") and rule.startswith("|---|")
+    assert len(rows) == 1
+    cells = [cell.strip() for cell in rows[0].strip("|").split("|")]
+    assert cells[0] == "tshirt" and cells[2] == "weight=0.7"
+    assert float(cells[4]) == 0.0 and float(cells[5]) < 3.0  # collision % after, edge error %
 
 
 def test_malformed_bvh_names_the_file(tmp_path, capsys):

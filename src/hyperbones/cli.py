@@ -144,10 +144,19 @@ def cmd_garment_make(args) -> int:
 
 
 def cmd_check_drape(args) -> int:
-    from hyperbones.garment.report import drape_table
+    from hyperbones.errors import ParameterError
+    from hyperbones.garment.report import HEADER, drape_rows
+    from hyperbones.garment.templates import TEMPLATES
 
-    resolutions = [int(v) for v in args.resolutions.split(",")]
-    print(drape_table(resolutions, args.bodies.split(";"), [Path(p) for p in args.mhclo], progress=not args.quiet))
+    resolutions = [int(v) for v in args.resolutions.split(",") if v.strip()]
+    templates = tuple(name.strip() for name in args.templates.split(",") if name.strip())
+    unknown = sorted(set(templates) - set(TEMPLATES))
+    if unknown:
+        raise ParameterError(f"--templates: unknown template(s) {unknown}; available: {', '.join(TEMPLATES)}")
+    print(HEADER, flush=True)
+    for row in drape_rows(resolutions, args.bodies.split(";"), [Path(p) for p in args.mhclo], templates,
+                          progress=not args.quiet):
+        print(row, flush=True)  # each row as its drape ends: a long table shows its results as it goes
     return 0
 
 
@@ -370,7 +379,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     check_drape = sub.add_parser("check-drape", help="table of drape quality over garments, resolutions and bodies")
     check_drape.add_argument("mhclo", nargs="*", help="MakeHuman .mhclo garments to include (every piece)")
-    check_drape.add_argument("--resolutions", default="2500,5000,10000", help="template vertex counts (comma list)")
+    check_drape.add_argument("--resolutions", default="2500,5000,10000",
+                             help="template vertex counts (comma list; empty: no templates)")
+    check_drape.add_argument("--templates", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
+                             help="procedural templates to include (comma list; empty: none)")
     check_drape.add_argument("--bodies", default="gender=0,weight=0,height=0;gender=1,muscle=1,weight=1,height=1;"
                              "gender=1,weight=0,height=0,proportions=1", help="body shapes separated by ';'")
     check_drape.add_argument("--quiet", action="store_true", help="no progress bar")

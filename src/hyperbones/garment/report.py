@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 from tqdm import tqdm
@@ -18,17 +19,21 @@ CORNER_BODIES = ("gender=0,weight=0,height=0", "gender=1,muscle=1,weight=1,heigh
                  "gender=1,weight=0,height=0,proportions=1")
 
 
-def drape_table(resolutions: list[int], bodies: list[str], mhclo_files: list[Path], progress: bool = True) -> str:
-    """Markdown table per garment and body: collision % (d < 0) and edge/area error % after
-    draping, and how close to rest the drape got: the 95th percentile and maximum over free
-    vertices of |∇E_i| / (m_i g), the longest vertex move of its last Newton step, whether
-    either met its tolerance, and its Newton iterations."""
-    jobs = [(name, n) for name in TEMPLATES for n in resolutions]
+HEADER = ("| garment | vertices | body | penetrating before | collision % after | edge error % | "
+          "area error % | force p95 | force max | last step mm | at rest | iterations | make s | drape s |\n"
+          "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|")
+
+
+def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path], templates: tuple[str, ...] = TEMPLATES,
+               progress: bool = True) -> Iterator[str]:
+    """One markdown row (see ``HEADER``) per garment and body, yielded as each drape ends:
+    collision % (d < 0) and edge/area error % after draping, and how close to rest the drape
+    got: the 95th percentile and maximum over free vertices of |∇E_i| / (m_i g), the longest
+    vertex move of its last Newton step, whether either met its tolerance, and its Newton
+    iterations."""
+    jobs = [(name, n) for name in templates for n in resolutions]
     jobs += [(str(path), None) for path in mhclo_files]
-    rows = ["| garment | vertices | body | penetrating before | collision % after | edge error % | "
-            "area error % | force p95 | force max | last step mm | at rest | iterations | make s | drape s |",
-            "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|"]
-    bar = tqdm(total=len(bodies) * (len(TEMPLATES) * len(resolutions) + 2 * len(mhclo_files)),
+    bar = tqdm(total=len(bodies) * (len(templates) * len(resolutions) + 2 * len(mhclo_files)),
                desc="drape", disable=not progress)
     for body_text in bodies:
         body = body_for(BodyShape.parse(body_text))
@@ -49,17 +54,16 @@ def drape_table(resolutions: list[int], bodies: list[str], mhclo_files: list[Pat
                 took = time.perf_counter() - made
                 distance = proximity.query(draped.vertices, max_distance=0.5).signed_distance
                 collision = 100.0 * float((distance < 0).float().mean())
-                rows.append(f"| {label} | {garment.num_vertices} | {body.shape.label()} | {report.penetrating_before} | "
-                            f"{collision:.3f} | {report.edge_error_pct:.2f} | {report.area_error_pct:.2f} | "
-                            f"{report.force_ratio_p95:.3f} | {report.force_ratio_max:.1f} | {_millimetres(report.newton_step_max)} | "
-                            f"{'yes' if report.converged else 'no'} | {report.iterations} | "
-                            f"{made - start:.1f} | {took:.1f} |")
                 bar.update(1)
+                yield (f"| {label} | {garment.num_vertices} | {body.shape.label()} | {report.penetrating_before} | "
+                       f"{collision:.3f} | {report.edge_error_pct:.2f} | {report.area_error_pct:.2f} | "
+                       f"{report.force_ratio_p95:.3f} | {report.force_ratio_max:.1f} | {_millimetres(report.newton_step_max)} | "
+                       f"{'yes' if report.converged else 'no'} | {report.iterations} | "
+                       f"{made - start:.1f} | {took:.1f} |")
     bar.close()
-    return "\n".join(rows)
 
 
-__all__ = ["CORNER_BODIES", "drape_table"]
+__all__ = ["CORNER_BODIES", "HEADER", "drape_rows"]
 
 
 def _millimetres(metres: float) -> str:
