@@ -57,6 +57,8 @@ def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
     (["motion", "walk"], "--out FILE.npz is required"),
     (["motion", "missing.bvh", "--out", "x.npz"], "missing.bvh: file not found"),
     (["check-drape", "--templates", "tshirt,cape"], "unknown template(s) ['cape']"),
+    (["check-drape", "--resolutions", "2500,lots"], "--resolutions must be a comma list"),
+    (["check-drape", "--bodies", "weight=0.2;hight=1"], "unknown key 'hight'"),
 ])
 def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
     monkeypatch.chdir(tmp_path)

@@ -148,11 +148,18 @@ def cmd_check_drape(args) -> int:
     from hyperbones.garment.report import HEADER, drape_rows
     from hyperbones.garment.templates import TEMPLATES
 
-    resolutions = [int(v) for v in args.resolutions.split(",") if v.strip()]
+    from hyperbones.body import BodyShape
+
+    try:
+        resolutions = [int(v) for v in args.resolutions.split(",") if v.strip()]
+    except ValueError:
+        raise ParameterError(f"--resolutions must be a comma list of vertex counts, got {args.resolutions!r}") from None
     templates = tuple(name.strip() for name in args.templates.split(",") if name.strip())
     unknown = sorted(set(templates) - set(TEMPLATES))
     if unknown:
         raise ParameterError(f"--templates: unknown template(s) {unknown}; available: {', '.join(TEMPLATES)}")
+    for body in args.bodies.split(";"):
+        BodyShape.parse(body)  # a bad body fails before any drape, not after an hour of them
     print(HEADER, flush=True)
     for row in drape_rows(resolutions, args.bodies.split(";"), [Path(p) for p in args.mhclo], templates,
                           progress=not args.quiet):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from tqdm import tqdm
@@ -24,13 +24,14 @@ HEADER = ("| garment | vertices | body | penetrating before | collision % after 
           "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|")
 
 
-def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path], templates: tuple[str, ...] = TEMPLATES,
-               progress: bool = True) -> Iterator[str]:
+def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path],
+               templates: Iterable[str] = tuple(TEMPLATES), progress: bool = True) -> Iterator[str]:
     """One markdown row (see ``HEADER``) per garment and body, yielded as each drape ends:
     collision % (d < 0) and edge/area error % after draping, and how close to rest the drape
     got: the 95th percentile and maximum over free vertices of |∇E_i| / (m_i g), the longest
     vertex move of its last Newton step, whether either met its tolerance, and its Newton
     iterations."""
+    templates = tuple(templates)
     jobs = [(name, n) for name in templates for n in resolutions]
     jobs += [(str(path), None) for path in mhclo_files]
     bar = tqdm(total=len(bodies) * (len(templates) * len(resolutions) + 2 * len(mhclo_files)),
