@@ -144,11 +144,10 @@ def cmd_garment_make(args) -> int:
 
 
 def cmd_check_drape(args) -> int:
+    from hyperbones.body import BodyShape
     from hyperbones.errors import ParameterError
     from hyperbones.garment.report import HEADER, drape_rows
     from hyperbones.garment.templates import TEMPLATES
-
-    from hyperbones.body import BodyShape
 
     try:
         resolutions = [int(v) for v in args.resolutions.split(",") if v.strip()]
