@@ -15,6 +15,11 @@ BODY_HELP = ("body shape as phenotype values in [0,1]: gender, age, muscle, weig
              "e.g. 'gender=0.2,weight=0.8' (default: all 0.5)")
 
 
+def _comma_list(text: str) -> list[str]:
+    """A comma-separated option as its non-empty, stripped items."""
+    return [item.strip() for item in text.split(",") if item.strip()]
+
+
 def _add_motion_args(parser: argparse.ArgumentParser) -> None:
     from hyperbones.motion import BUILTINS, DEFAULT_BLEND_IN
 
@@ -150,17 +155,18 @@ def cmd_check_drape(args) -> int:
     from hyperbones.garment.templates import TEMPLATES
 
     try:
-        resolutions = [int(v) for v in args.resolutions.split(",") if v.strip()]
+        resolutions = [int(v) for v in _comma_list(args.resolutions)]
     except ValueError:
         raise ParameterError(f"--resolutions must be a comma list of vertex counts, got {args.resolutions!r}") from None
-    templates = tuple(name.strip() for name in args.templates.split(",") if name.strip())
+    templates = _comma_list(args.templates)
     unknown = sorted(set(templates) - set(TEMPLATES))
     if unknown:
         raise ParameterError(f"--templates: unknown template(s) {unknown}; available: {', '.join(TEMPLATES)}")
-    for body in args.bodies.split(";"):
+    bodies = args.bodies.split(";")
+    for body in bodies:
         BodyShape.parse(body)  # a bad body fails before any drape, not after an hour of them
     print(HEADER, flush=True)
-    for row in drape_rows(resolutions, args.bodies.split(";"), [Path(p) for p in args.mhclo], templates,
+    for row in drape_rows(resolutions, bodies, [Path(p) for p in args.mhclo], templates,
                           progress=not args.quiet):
         print(row, flush=True)  # each row as its drape ends: a long table shows its results as it goes
     return 0
@@ -169,10 +175,9 @@ def cmd_check_drape(args) -> int:
 def cmd_eval(args) -> int:
     from hyperbones.simulate.evaluate import evaluate
 
-    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
     bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
-    report = evaluate(split(args.methods), split(args.garments), split(args.motions), bodies, args.out,
-                      frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
+    report = evaluate(_comma_list(args.methods), _comma_list(args.garments), _comma_list(args.motions), bodies,
+                      args.out, frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
                       device=args.device, source_fps=dict(args.source_fps or []), progress=not args.quiet)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
@@ -209,9 +214,8 @@ def cmd_bench(args) -> int:
     from hyperbones.io_utils import atomic_path
     from hyperbones.runtime.bench import bench, bench_table, records_as_dicts
 
-    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
-    records = bench(split(args.methods), split(args.garments), vertices=args.vertices, device=args.device,
-                    frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint, progress=not args.quiet)
+    records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
+                    device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint, progress=not args.quiet)
     print(bench_table(records))
     if args.json:
         with atomic_path(args.json) as tmp:
@@ -223,11 +227,10 @@ def cmd_bench(args) -> int:
 def cmd_check_teacher(args) -> int:
     from hyperbones.simulate.stability import settling_table, stability_table
 
-    split = lambda text: [item.strip() for item in text.split(",") if item.strip()]  # noqa: E731
-    garments = split(args.garments)
+    garments = _comma_list(args.garments)
     common = dict(vertices=args.vertices, body=args.body, checkpoint=args.checkpoint, device=args.device,
                   source_fps=dict(args.source_fps or []), progress=not args.quiet)
-    print(stability_table(args.method, garments, split(args.motions), frames=args.frames, **common))
+    print(stability_table(args.method, garments, _comma_list(args.motions), frames=args.frames, **common))
     print()
     print(settling_table(args.method, garments, args.settle_motion, hold=args.hold, **common))
     return 0

@@ -175,8 +175,9 @@ class TeacherTrainer:
         terms = physics_terms(positions_next, positions, velocities, rest, nearest, body_now, body_next,
                               self.body_faces, weight, dt)
         loss = sum(terms.values())
+        learning_rate = learning_rate_at(self.step, cfg.train)
         for group in self.optimizer.param_groups:
-            group["lr"] = learning_rate_at(self.step, cfg.train)
+            group["lr"] = learning_rate
         self.optimizer.zero_grad(set_to_none=True)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
@@ -198,7 +199,7 @@ class TeacherTrainer:
             self._episode = None  # a blown-up episode is dropped; the loss already pushed against it
         logs = {name: float(value.detach()) for name, value in terms.items()}
         logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
-                    learning_rate=learning_rate_at(self.step, cfg.train),
+                    learning_rate=learning_rate,
                     rollout=rollout_length(self.step, cfg.train), settle=float(self._k == 0))
         return logs
 
