@@ -1,0 +1,1 @@
+"""The virtual-bone rig of a garment on a body (skeleton -> bones -> garment)."""
