@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import numpy as np
-import potpourri3d
 import torch
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
@@ -35,6 +34,8 @@ def geodesic_distances(vertices: torch.Tensor, faces: torch.Tensor, sources: tor
     (intrinsic Delaunay) Laplacian, which also copes with the non-manifold spots of
     imported clothes. The factorisation is done once and reused for every source.
     """
+    import potpourri3d  # only here: the per-frame runtime imports this module for mesh_components
+
     num_vertices = vertices.shape[0]
     if len(sources) and (int(sources.min()) < 0 or int(sources.max()) >= num_vertices):
         raise ParameterError("geodesic distances: a source index is out of range")

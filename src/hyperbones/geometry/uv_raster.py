@@ -165,6 +165,22 @@ class UvRaster:
         sampler = _fill_from_neighbours(sampler, copies > 0, faces)
         return cls(size, raster, _csr(sampler.to(torch.float32)), coverage)
 
+    def state_dict(self) -> dict:
+        """Plain tensors (COO indices and values) for saving."""
+        raster, sampler = self.raster.to_sparse_coo(), self.sampler.to_sparse_coo()
+        return {"resolution": self.resolution, "coverage": self.coverage,
+                "raster_indices": raster.indices(), "raster_values": raster.values(), "raster_shape": list(raster.shape),
+                "sampler_indices": sampler.indices(), "sampler_values": sampler.values(),
+                "sampler_shape": list(sampler.shape)}
+
+    @classmethod
+    def from_state_dict(cls, state: dict) -> "UvRaster":
+        def matrix(name: str) -> torch.Tensor:
+            return _csr(torch.sparse_coo_tensor(state[f"{name}_indices"], state[f"{name}_values"],
+                                                tuple(state[f"{name}_shape"]), check_invariants=True))
+
+        return cls(int(state["resolution"]), matrix("raster"), matrix("sampler"), state["coverage"])
+
     def to(self, device: torch.device | str) -> "UvRaster":
         return UvRaster(self.resolution, self.raster.to(device), self.sampler.to(device), self.coverage.to(device))
 

@@ -165,3 +165,16 @@ def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: 
                    "world": EdgeSet(senders, receivers, world_features * LENGTH_SCALE)},
         num_garment=num_garment,
     )
+
+
+def canonical_graph(topology: GarmentTopology, body_vertices: torch.Tensor, body_faces: torch.Tensor,
+                    nearest: Nearest, world_radius: float = WORLD_RADIUS) -> ClothGraph:
+    """The graph Module B encodes once per identity: the garment at rest on the still A-pose body.
+
+    body_vertices: (Vb,3) the canonical body; nearest: ``BodyProximity.query`` of the rest
+    garment against it. Zero velocity, the body still, pins where they are, and no internal
+    force (the garment is at its own rest shape): the same features the teacher reads.
+    """
+    rest = topology.rest_vertices
+    return build_graph(topology, rest, torch.zeros_like(rest), rest, body_vertices, body_vertices, body_faces,
+                       nearest, world_radius=world_radius)

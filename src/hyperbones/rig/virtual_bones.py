@@ -17,16 +17,17 @@ corrections of Module A act on that 6D rotation and on the position.
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
+from typing import TYPE_CHECKING
 
 import roma
 import torch
 
-from hyperbones.body.anny_body import Body
 from hyperbones.errors import ParameterError
-from hyperbones.garment.garment import Garment
-from hyperbones.geometry.geodesic import geodesic_distances
-from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.geometry.sampling import farthest_point_sampling
+
+if TYPE_CHECKING:
+    from hyperbones.body.anny_body import Body
+    from hyperbones.garment.garment import Garment
 
 NUM_BONES = 128
 SIGMA = 0.05  # m, the geodesic fall-off of the initial weights (paper)
@@ -50,6 +51,10 @@ class VirtualBones:
     @classmethod
     def bind(cls, garment: Garment, body: Body, num_bones: int = NUM_BONES, sigma: float = SIGMA) -> "VirtualBones":
         """Place ``num_bones`` bones on ``garment`` (canonical, fitted to ``body``)."""
+        # Binding needs Warp and potpourri3d; posing (the per-frame path) needs neither.
+        from hyperbones.geometry.geodesic import geodesic_distances
+        from hyperbones.geometry.proximity import BodyProximity
+
         if num_bones > garment.num_vertices:
             raise ParameterError(f"garment {garment.name!r}: {num_bones} virtual bones asked for, "
                                  f"but it has only {garment.num_vertices} vertices")

@@ -1,0 +1,45 @@
+"""The whole HyperBones network: Module C (teacher, with the shared trunk), B and A.
+
+Module B reads the teacher's trunk (the same parameters, not a copy), so physics gradients
+on C shape B's identity encoding (paper Sec. 3.5).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from torch import nn
+
+from hyperbones.models.module_a import ModuleA, ModuleAConfig
+from hyperbones.models.module_b import ModuleB
+from hyperbones.models.teacher import Teacher, TrunkConfig
+
+
+@dataclass(frozen=True)
+class HyperBonesConfig:
+    """trunk: the shared MeshGraphNet; runtime: Module A (its bone count, d_z and d_f size Module B's heads)."""
+
+    trunk: TrunkConfig = field(default_factory=TrunkConfig)
+    runtime: ModuleAConfig = field(default_factory=ModuleAConfig)
+
+    def as_dict(self) -> dict:
+        return {"trunk": asdict(self.trunk), "runtime": asdict(self.runtime)}
+
+    @classmethod
+    def from_dict(cls, values: dict) -> "HyperBonesConfig":
+        runtime = dict(values.get("runtime", {}))
+        if "conv_channels" in runtime:
+            runtime["conv_channels"] = tuple(runtime["conv_channels"])
+        return cls(TrunkConfig(**values.get("trunk", {})), ModuleAConfig(**runtime))
+
+
+class HyperBonesModel(nn.Module):
+    """teacher (Module C), encoder (Module B on the teacher's trunk), runtime (Module A)."""
+
+    def __init__(self, config: HyperBonesConfig = HyperBonesConfig()):
+        super().__init__()
+        self.config = config
+        self.teacher = Teacher(config.trunk)
+        self.encoder = ModuleB(self.teacher, config.runtime.num_bones, config.runtime.shape_code,
+                               config.runtime.uv_features)
+        self.runtime = ModuleA(config.runtime)

@@ -1,0 +1,180 @@
+"""Module A: the per-frame runtime network (paper Sec. 3.2).
+
+Per frame, for a batch of N characters that share the bone count B:
+
+  bone window (N,3,B,3) ──Bone-Net (FiLM by the shape code)──> ΔT (N,B,9), pose embedding φ (N,P)
+  bone frames + ΔT ──garment LBS with the identity's weights──> Stage-1 garment (V,3)
+  [P_UV | coverage | F_UV | φ] (N,C,R,R) ──Conv-MLP──> displacement image (N,3,R,R) ──> δp (V,3)
+
+Everything here lives in the character's local frame (``heading_frame``): origin at the
+Hips, Z up, X/Y turned with the character's heading. The network therefore sees the same
+input for the same motion in any place and facing direction, and gravity stays along −Z.
+
+Input window: bone positions at t−2, t−1, t and their frame-to-frame displacements
+(t−1)−(t−2) and t−(t−1): first and second differences from three frames. Positions are in
+metres, displacements in centimetres per frame (both of order one).
+
+Corrections: the 6D rotation of each bone frame (first two columns of its rotation) gets
+Δ6D added before Gram–Schmidt (the paper's rule), its position Δt (the network's output in
+centimetres). The last layers of Bone-Net, the Shape Modulator and the Conv-MLP start at
+zero, so an untrained Module A is plain virtual-bone skinning.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import roma
+import torch
+from torch import nn
+
+CENTIMETRE = 0.01
+
+
+@dataclass(frozen=True)
+class ModuleAConfig:
+    """Sizes of Module A (paper defaults except the UV resolution, see ``uv_resolution``).
+
+    num_bones: B virtual bones.  shape_code: d_z.  hidden/layers: Bone-Net (4 × 256).
+    pose_embedding: channels of the broadcast pose embedding φ.  uv_features: d_f of F_UV.
+    uv_resolution: R of the UV maps (paper 512; smaller costs less per frame on a CPU).
+    conv_channels: the Conv-MLP's hidden widths (64, 128, 64), then 3.
+    use_conv: False drops Stage 2 (the "no Conv-MLP" ablation).
+    """
+
+    num_bones: int = 128
+    shape_code: int = 128
+    hidden: int = 256
+    layers: int = 4
+    pose_embedding: int = 16
+    uv_features: int = 32
+    uv_resolution: int = 128
+    conv_channels: tuple[int, int, int] = (64, 128, 64)
+    use_conv: bool = True
+
+
+def heading_frame(root_rotation: torch.Tensor, root_position: torch.Tensor) -> torch.Tensor:
+    """(...,3,3) Hips rotation (relative to the A-pose), (...,3) Hips position -> (...,4,4) world -> local.
+
+    The local frame has its origin at the Hips and is turned about Z by the character's
+    heading (the A-pose faces −Y), so local −Y is where the character faces.
+    """
+    facing = root_rotation[..., :, 1] * -1.0  # the rotated −Y axis
+    yaw = torch.atan2(facing[..., 0], -facing[..., 1])
+    cos, sin = torch.cos(yaw), torch.sin(yaw)
+    out = torch.zeros(*yaw.shape, 4, 4, dtype=root_rotation.dtype, device=root_rotation.device)
+    # Rz(yaw)^T
+    out[..., 0, 0], out[..., 0, 1] = cos, sin
+    out[..., 1, 0], out[..., 1, 1] = -sin, cos
+    out[..., 2, 2] = 1.0
+    out[..., :3, 3] = -(out[..., :3, :3] @ root_position[..., None]).squeeze(-1)
+    out[..., 3, 3] = 1.0
+    return out
+
+
+def bone_window_features(window: torch.Tensor) -> torch.Tensor:
+    """(N,3,B,3) local bone positions at t−2, t−1, t -> (N, 15·B) Bone-Net input."""
+    displacement = (window[:, 1:] - window[:, :-1]) / CENTIMETRE  # (N,2,B,3)
+    return torch.cat([window.transpose(1, 2).flatten(1), displacement.transpose(1, 2).flatten(1)], dim=1)
+
+
+class ShapeModulator(nn.Module):
+    """z (N,d_z) -> FiLM scales and shifts (N,layers,2,hidden): a 3-layer MLP.
+
+    The scale is 1 + the output, and the output layer starts at zero (identity FiLM).
+    """
+
+    def __init__(self, config: ModuleAConfig):
+        super().__init__()
+        self.layers, self.hidden = config.layers, config.hidden
+        self.net = nn.Sequential(
+            nn.Linear(config.shape_code, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, config.hidden), nn.ReLU(),
+            nn.Linear(config.hidden, 2 * config.layers * config.hidden))
+        nn.init.zeros_(self.net[-1].weight)
+        nn.init.zeros_(self.net[-1].bias)
+
+    def forward(self, shape_code: torch.Tensor) -> torch.Tensor:
+        film = self.net(shape_code).unflatten(-1, (self.layers, 2, self.hidden))
+        return film + torch.tensor([1.0, 0.0], device=film.device)[:, None]
+
+
+class BoneNet(nn.Module):
+    """Bone window features (N,15B) and FiLM (N,layers,2,hidden) -> ΔT (N,B,9), φ (N,P).
+
+    ΔT per bone: Δ6D (6) then Δt in metres (3).
+    """
+
+    def __init__(self, config: ModuleAConfig):
+        super().__init__()
+        self.num_bones = config.num_bones
+        sizes = [15 * config.num_bones] + [config.hidden] * config.layers
+        self.hidden_layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
+        self.corrections = nn.Linear(config.hidden, 9 * config.num_bones)
+        self.pose_embedding = nn.Linear(config.hidden, config.pose_embedding)
+        nn.init.zeros_(self.corrections.weight)
+        nn.init.zeros_(self.corrections.bias)
+
+    def forward(self, features: torch.Tensor, film: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        h = features
+        for index, layer in enumerate(self.hidden_layers):
+            h = torch.relu(film[:, index, 0] * layer(h) + film[:, index, 1])
+        delta = self.corrections(h).unflatten(-1, (self.num_bones, 9))
+        delta = torch.cat([delta[..., :6], delta[..., 6:] * CENTIMETRE], dim=-1)
+        return delta, self.pose_embedding(h)
+
+
+def correct_bones(rotations: torch.Tensor, positions: torch.Tensor, delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Bone frames (...,B,3,3), (...,B,3) and ΔT (...,B,9) -> corrected frames (6D rotations add)."""
+    six_d = rotations[..., :, :2] + delta[..., :6].unflatten(-1, (3, 2))
+    return roma.special_gramschmidt(six_d), positions + delta[..., 6:]
+
+
+class ConvRefiner(nn.Module):
+    """The Conv-MLP: (N,C_in,R,R) -> (N,3,R,R) displacements in metres.
+
+    Five 3×3 convolutions C_in→64→128→128→64→3 with ReLU; the 128→128 layer is residual.
+    """
+
+    def __init__(self, in_channels: int, channels: tuple[int, int, int] = (64, 128, 64)):
+        super().__init__()
+        first, middle, last = channels
+        self.inp = nn.Conv2d(in_channels, first, 3, padding=1)
+        self.up = nn.Conv2d(first, middle, 3, padding=1)
+        self.mid = nn.Conv2d(middle, middle, 3, padding=1)
+        self.down = nn.Conv2d(middle, last, 3, padding=1)
+        self.out = nn.Conv2d(last, 3, 3, padding=1)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        h = torch.relu(self.inp(x))
+        h = torch.relu(self.up(h))
+        h = h + torch.relu(self.mid(h))
+        h = torch.relu(self.down(h))
+        return self.out(h) * CENTIMETRE
+
+
+class ModuleA(nn.Module):
+    """Shape Modulator + Bone-Net + Conv-MLP (the learnt parts of the runtime)."""
+
+    def __init__(self, config: ModuleAConfig = ModuleAConfig()):
+        super().__init__()
+        self.config = config
+        self.modulator = ShapeModulator(config)
+        self.bone_net = BoneNet(config)
+        in_channels = 3 + 1 + config.uv_features + config.pose_embedding
+        self.refiner = ConvRefiner(in_channels, config.conv_channels) if config.use_conv else None
+
+    def refine(self, positions_uv: torch.Tensor, coverage: torch.Tensor, features_uv: torch.Tensor,
+               pose_embedding: torch.Tensor) -> torch.Tensor:
+        """Stage 2 on images: P_UV (N,3,R,R), coverage (N,1,R,R), F_UV (N,d_f,R,R), φ (N,P) -> (N,3,R,R).
+
+        Zero when the config has no Conv-MLP.
+        """
+        if self.refiner is None:
+            return torch.zeros_like(positions_uv)
+        n, _, rows, cols = positions_uv.shape
+        x = torch.cat([positions_uv, coverage, features_uv,
+                       pose_embedding[:, :, None, None].expand(n, pose_embedding.shape[1], rows, cols)], dim=1)
+        return self.refiner(x)

@@ -1,0 +1,51 @@
+"""Module B: the identity encoder (paper Sec. 3.3), run once per body shape × garment.
+
+The canonical graph goes through the trunk shared with the teacher (same weights: physics
+gradients reach it through Module C during training); three heads read the garment nodes'
+latents F_c (V,latent):
+
+  shape code z     mean over the garment nodes, then a 2-layer MLP -> (d_z,)
+  Δw               per vertex, MLP latent -> 64 -> B: corrections of the log initial weights
+  f_v              per vertex, linear latent -> d_f: rasterised once into F_UV
+
+The Δw and f_v heads start at zero (at first the weights are the geodesic ones and F_UV
+carries nothing).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+from hyperbones.models.cloth_graph import ClothGraph
+from hyperbones.models.teacher import Teacher
+
+
+@dataclass
+class IdentityCode:
+    """What Module B gives Module A for one identity: z (d_z,), Δw (V,B), f_v (V,d_f)."""
+
+    shape_code: torch.Tensor
+    weight_corrections: torch.Tensor
+    vertex_features: torch.Tensor
+
+
+class ModuleB(nn.Module):
+    """Heads over the shared trunk; ``trunk`` is the teacher whose ``encode`` it reuses (not copied)."""
+
+    def __init__(self, trunk: Teacher, num_bones: int = 128, shape_code: int = 128, uv_features: int = 32):
+        super().__init__()
+        latent = trunk.config.latent
+        self.trunk = trunk
+        self.shape_head = nn.Sequential(nn.Linear(latent, shape_code), nn.ReLU(), nn.Linear(shape_code, shape_code))
+        self.weight_head = nn.Sequential(nn.Linear(latent, 64), nn.ReLU(), nn.Linear(64, num_bones))
+        self.feature_head = nn.Linear(latent, uv_features)
+        for layer in (self.weight_head[-1], self.feature_head):
+            nn.init.zeros_(layer.weight)
+            nn.init.zeros_(layer.bias)
+
+    def forward(self, graph: ClothGraph) -> IdentityCode:
+        latents = self.trunk.encode(graph)[: graph.num_garment]  # (V,latent)
+        return IdentityCode(self.shape_head(latents.mean(0)), self.weight_head(latents), self.feature_head(latents))

@@ -1,0 +1,123 @@
+"""The identity cache: everything Module A needs for one body shape × garment, made once.
+
+``encode_identity`` runs Module B (the trunk over the canonical graph, then its heads) and
+folds every per-identity quantity into plain tensors, so the per-frame path only multiplies:
+  - the garment-from-bone weights softmax(log W0 + Δw) (V,B);
+  - the Shape Modulator's FiLM parameters of z (the network never sees z per frame);
+  - F_UV, the vertex features rasterised once;
+  - the UV raster/sampler matrices and the virtual bones.
+It can be saved and loaded (``torch.load(weights_only=True)``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import torch
+
+from hyperbones.errors import InputFileError
+from hyperbones.geometry.uv_raster import UvRaster
+from hyperbones.io_utils import atomic_path
+from hyperbones.rig.virtual_bones import VirtualBones
+
+if TYPE_CHECKING:
+    from hyperbones.body.anny_body import Body
+    from hyperbones.garment.garment import Garment
+    from hyperbones.models.hyperbones import HyperBonesModel
+
+IDENTITY_VERSION = 1
+
+
+@dataclass
+class Identity:
+    """One identity, ready for the per-frame runtime.
+
+    rest_vertices: (V,3) the canonical garment on this body.  faces: (F,3).
+    rest_joint_positions: (31,3) the body's canonical joint heads (for forward kinematics).
+    bones: the virtual bones.  weights: (V,B) garment-from-bone weights (rows sum to 1).
+    film: (layers,2,hidden) FiLM scales and shifts of Bone-Net.
+    features_uv: (d_f,R,R) F_UV.  raster: the UV atlas maps at resolution R.
+    """
+
+    name: str
+    rest_vertices: torch.Tensor
+    faces: torch.Tensor
+    rest_joint_positions: torch.Tensor
+    bones: VirtualBones
+    weights: torch.Tensor
+    film: torch.Tensor
+    features_uv: torch.Tensor
+    raster: UvRaster
+
+    @property
+    def num_vertices(self) -> int:
+        return self.rest_vertices.shape[0]
+
+    def to(self, device: torch.device | str) -> "Identity":
+        return Identity(self.name, self.rest_vertices.to(device), self.faces.to(device),
+                        self.rest_joint_positions.to(device), self.bones.to(device), self.weights.to(device),
+                        self.film.to(device), self.features_uv.to(device), self.raster.to(device))
+
+    def save(self, path: str | Path) -> Path:
+        """Write the cache atomically (plain tensors; sparse maps as COO index/value pairs)."""
+        payload = {
+            "version": IDENTITY_VERSION, "name": self.name, "rest_vertices": self.rest_vertices,
+            "faces": self.faces, "rest_joint_positions": self.rest_joint_positions,
+            "bones": self.bones.state_dict(), "weights": self.weights, "film": self.film,
+            "features_uv": self.features_uv, "raster": self.raster.state_dict(),
+        }
+        path = Path(path)
+        with atomic_path(path) as tmp:
+            torch.save(payload, tmp)
+        return path
+
+    @classmethod
+    def load(cls, path: str | Path, device: torch.device | str = "cpu") -> "Identity":
+        path = Path(path)
+        if not path.exists():
+            raise InputFileError(path, "identity cache not found")
+        try:
+            payload = torch.load(path, map_location="cpu", weights_only=True)
+        except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
+            raise InputFileError(path, f"not a hyperbones identity cache ({type(error).__name__})") from None
+        if not isinstance(payload, dict) or payload.get("version") != IDENTITY_VERSION:
+            raise InputFileError(path, f"not a version-{IDENTITY_VERSION} hyperbones identity cache")
+        return cls(payload["name"], payload["rest_vertices"], payload["faces"], payload["rest_joint_positions"],
+                   VirtualBones(**payload["bones"]), payload["weights"], payload["film"], payload["features_uv"],
+                   UvRaster.from_state_dict(payload["raster"])).to(device)
+
+
+def encode_identity(model: HyperBonesModel, garment: Garment, body: Body, name: str | None = None,
+                    uv_resolution: int | None = None) -> Identity:
+    """Run Module B for ``garment`` fitted to ``body`` (canonical pose); differentiable when grad is on.
+
+    uv_resolution: R of the UV maps (default: the model's training resolution).
+
+    The virtual bones and the UV maps depend on geometry alone; the network contributes
+    Δw, z (as FiLM parameters) and F_UV.
+    """
+    from hyperbones.geometry.proximity import BodyProximity
+    from hyperbones.models.cloth_graph import GarmentTopology, canonical_graph
+    from hyperbones.physics.cloth import ClothRest
+
+    device = next(model.parameters()).device
+    config = model.config.runtime
+    bones = VirtualBones.bind(garment, body, config.num_bones)
+    raster = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices,
+                            uv_resolution or config.uv_resolution)
+    rest = ClothRest.from_mesh(garment.vertices, garment.faces, garment.material)
+    topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
+                                     garment.material).to(device)
+    proximity = BodyProximity(body.faces.to(device), device=device)
+    proximity.update(body.rest_vertices.to(device))
+    nearest = proximity.query(garment.vertices.to(device), max_distance=1.0)
+    graph = canonical_graph(topology, body.rest_vertices.to(device), body.faces.to(device), nearest)
+    code = model.encoder(graph)
+    bones, raster = bones.to(device), raster.to(device)
+    weights = torch.softmax(bones.log_weights + code.weight_corrections, dim=1)
+    film = model.runtime.modulator(code.shape_code[None])[0]
+    features_uv = raster.rasterize(code.vertex_features[None])[0]
+    return Identity(name or garment.name, garment.vertices.to(device), garment.faces.to(device),
+                    body.rest_joint_positions.to(device), bones, weights, film, features_uv, raster)

@@ -1,0 +1,118 @@
+"""The per-frame runtime: Module A on cached identities, several characters per batch.
+
+Per frame and character the cost is fixed: forward kinematics of 31 joints, the bones'
+skinning blend, one Bone-Net pass (batched over characters), one (V,B)@(B,12) garment
+skinning, two sparse products to and from the UV image and the Conv-MLP (batched). No
+state but the last three frames of bone positions, so it does not grow with the motion.
+
+    sim = Simulator(model, [identity])          # or Simulator.from_checkpoint(path, ...)
+    for rotations, root in motion_frames:       # (31,3,3), (3,) per character
+        vertices = sim.step(rotations[None], root[None])[0]   # (V,3)
+"""
+
+from __future__ import annotations
+
+import torch
+
+from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
+from hyperbones.errors import ParameterError
+from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.models.module_a import ModuleA, bone_window_features, correct_bones, heading_frame
+from hyperbones.rig.virtual_bones import bone_transforms
+from hyperbones.runtime.identity import Identity
+
+WINDOW = 3  # frames t−2, t−1, t
+
+
+def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
+    """(...,4,4) affine maps, (...,P,3) points -> (...,P,3) (each map applied to its P points)."""
+    return points @ transform[..., :3, :3].transpose(-1, -2) + transform[..., None, :3, 3]
+
+
+def module_a_frame(module_a: ModuleA, identities: list[Identity], window: torch.Tensor, rotations: torch.Tensor,
+                   positions: torch.Tensor, to_local: torch.Tensor) -> list[torch.Tensor]:
+    """One frame of Module A for N characters (differentiable; the trainer calls it too).
+
+    Args:
+        identities: N identity caches (one per character; the same one may repeat).
+        window: (N,3,B,3) world bone positions at t−2, t−1, t.
+        rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
+        to_local: (N,4,4) world -> local frame of each character at t.
+
+    Returns:
+        N tensors (V_i,3): world garment positions at t.
+    """
+    local_window = transform_points(to_local[:, None], window)
+    film = torch.stack([identity.film for identity in identities])
+    delta, pose_embedding = module_a.bone_net(bone_window_features(local_window), film)
+    local_rotations = to_local[:, None, :3, :3] @ rotations
+    local_positions = transform_points(to_local, positions)
+    local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
+    stage_one = [
+        linear_blend_skinning(identity.rest_vertices, identity.weights,
+                              bone_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
+                                              local_positions[i:i + 1]))[0]
+        for i, identity in enumerate(identities)]
+    if module_a.refiner is not None:
+        images = torch.cat([identity.raster.rasterize(points[None]) for identity, points in zip(identities, stage_one)])
+        features = torch.stack([identity.features_uv for identity in identities])
+        coverage = torch.stack([identity.raster.coverage for identity in identities])[:, None]
+        displacement = module_a.refine(images, coverage, features, pose_embedding)
+        stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
+                     for i, (identity, points) in enumerate(zip(identities, stage_one))]
+    to_world = torch.linalg.inv(to_local)
+    return [transform_points(to_world[i], points) for i, points in enumerate(stage_one)]
+
+
+class Simulator:
+    """Module A stepping N characters frame by frame; it keeps their bone windows itself.
+
+    identities: one cache per character (``encode_identity`` or ``Identity.load``), all at one
+    UV resolution (the Conv-MLP is fully convolutional: it runs at the resolution the caches
+    were made at, which need not be the one it was trained at).
+    The first frame fills the window (the characters start at rest).
+    """
+
+    def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu"):
+        if not identities:
+            raise ParameterError("Simulator needs at least one identity")
+        bones = {identity.bones.num_bones for identity in identities}
+        if bones != {module_a.config.num_bones}:
+            raise ParameterError(f"identities have {sorted(bones)} virtual bones, the model expects "
+                                 f"{module_a.config.num_bones}")
+        resolutions = {identity.raster.resolution for identity in identities}
+        if len(resolutions) > 1:
+            raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
+        self.device = torch.device(device)
+        self.module_a = module_a.to(self.device).eval()
+        self.identities = [identity.to(self.device) for identity in identities]
+        self.window: torch.Tensor | None = None  # (N,3,B,3) world bone positions
+
+    def reset(self) -> None:
+        """Forget the motion so far (the next step starts at rest)."""
+        self.window = None
+
+    @torch.no_grad()
+    def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor) -> list[torch.Tensor]:
+        """One frame: (N,31,3,3) world joint rotations (relative to the A-pose), (N,3) Hips
+        positions -> N tensors (V_i,3) of world garment positions."""
+        count = len(self.identities)
+        if joint_rotations.shape != (count, 31, 3, 3) or root_translation.shape != (count, 3):
+            raise ParameterError(f"step expects ({count},31,3,3) rotations and ({count},3) roots, got "
+                                 f"{tuple(joint_rotations.shape)} and {tuple(root_translation.shape)}")
+        rotations_in = joint_rotations.to(self.device, torch.float32)
+        roots = root_translation.to(self.device, torch.float32)
+        bone_rotations, bone_positions = [], []
+        for i, identity in enumerate(self.identities):
+            joints = forward_kinematics(identity.rest_joint_positions, rotations_in[i:i + 1], roots[i:i + 1])
+            transforms = skinning_transforms(identity.rest_joint_positions, rotations_in[i:i + 1], joints)
+            rotation, position = identity.bones.pose(transforms)
+            bone_rotations.append(rotation[0])
+            bone_positions.append(position[0])
+        rotations, positions = torch.stack(bone_rotations), torch.stack(bone_positions)
+        if self.window is None:
+            self.window = positions[:, None].expand(count, WINDOW, *positions.shape[1:]).clone()
+        else:
+            self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
+        to_local = heading_frame(rotations_in[:, 0], roots)
+        return module_a_frame(self.module_a, self.identities, self.window, rotations, positions, to_local)

@@ -1,0 +1,89 @@
+"""Module A's networks: the local frame, Bone-Net with FiLM, bone corrections, the Conv-MLP."""
+
+import math
+
+import pytest
+import torch
+
+from hyperbones.geometry.rotations import rot_z
+from hyperbones.models.module_a import (ModuleA, ModuleAConfig, bone_window_features, correct_bones,
+                                        heading_frame)
+
+SMALL = ModuleAConfig(num_bones=8, shape_code=16, hidden=32, pose_embedding=4, uv_features=5, uv_resolution=16)
+
+
+def test_heading_frame_puts_the_hips_at_the_origin_facing_minus_y():
+    yaw = torch.tensor(0.8)
+    tilt = torch.tensor([[1.0, 0, 0], [0, math.cos(0.2), -math.sin(0.2)], [0, math.sin(0.2), math.cos(0.2)]])
+    hips = rot_z(yaw) @ tilt  # a heading plus a forward lean, which the frame ignores
+    root = torch.tensor([1.0, 2.0, 0.9])
+    frame = heading_frame(hips, root)
+    assert torch.allclose(frame[:3, :3] @ root + frame[:3, 3], torch.zeros(3), atol=1e-6)
+    facing = rot_z(yaw) @ torch.tensor([0.0, -1.0, 0.0])
+    assert torch.allclose(frame[:3, :3] @ facing, torch.tensor([0.0, -1.0, 0.0]), atol=1e-6)
+    assert torch.allclose(frame[2, :3], torch.tensor([0.0, 0.0, 1.0]))  # Z stays up
+
+
+def test_window_features():
+    window = torch.zeros(2, 3, 8, 3)
+    window[:, 2, :, 0] = 0.01  # one centimetre along x in the last frame
+    features = bone_window_features(window)
+    assert features.shape == (2, 15 * 8)
+    displacement = features[:, 9 * 8:].reshape(2, 8, 2, 3)
+    assert torch.allclose(displacement[:, :, 1, 0], torch.ones(2, 8))  # centimetres per frame
+    assert torch.allclose(displacement[:, :, 0], torch.zeros(2, 8, 3))
+
+
+def test_untrained_module_a_changes_nothing():
+    torch.manual_seed(0)
+    model = ModuleA(SMALL)
+    film = model.modulator(torch.randn(3, SMALL.shape_code))
+    assert torch.allclose(film[:, :, 0], torch.ones(3, SMALL.layers, SMALL.hidden))
+    assert torch.allclose(film[:, :, 1], torch.zeros(3, SMALL.layers, SMALL.hidden))
+    delta, embedding = model.bone_net(torch.randn(3, 15 * SMALL.num_bones), film)
+    assert delta.shape == (3, SMALL.num_bones, 9) and embedding.shape == (3, SMALL.pose_embedding)
+    assert torch.equal(delta, torch.zeros_like(delta))
+    images = model.refine(torch.randn(3, 3, 16, 16), torch.ones(3, 1, 16, 16), torch.randn(3, 5, 16, 16), embedding)
+    assert images.shape == (3, 3, 16, 16) and torch.equal(images, torch.zeros_like(images))
+
+
+def test_film_changes_the_output():
+    torch.manual_seed(1)
+    model = ModuleA(SMALL)
+    for layer in (model.bone_net.corrections, model.modulator.net[-1]):
+        torch.nn.init.normal_(layer.weight, std=0.1)
+    features = torch.randn(1, 15 * SMALL.num_bones)
+    a = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
+    b = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
+    assert (a - b).abs().max() > 1e-3
+
+
+def test_bone_corrections():
+    rotations = rot_z(torch.tensor([0.3, -1.2]))[:, None].expand(2, 4, 3, 3)
+    positions = torch.randn(2, 4, 3)
+    same_r, same_p = correct_bones(rotations, positions, torch.zeros(2, 4, 9))
+    assert torch.allclose(same_r, rotations, atol=1e-6) and torch.equal(same_p, positions)
+    delta = torch.randn(2, 4, 9)
+    new_r, new_p = correct_bones(rotations, positions, delta)
+    assert torch.allclose(new_r @ new_r.transpose(-1, -2), torch.eye(3).expand(2, 4, 3, 3), atol=1e-5)
+    assert torch.allclose(torch.linalg.det(new_r), torch.ones(2, 4), atol=1e-5)
+    assert torch.allclose(new_p, positions + delta[..., 6:])
+
+
+def test_no_conv_ablation():
+    model = ModuleA(ModuleAConfig(**{**SMALL.__dict__, "use_conv": False}))
+    assert model.refiner is None
+    out = model.refine(torch.randn(1, 3, 16, 16), torch.ones(1, 1, 16, 16), torch.randn(1, 5, 16, 16),
+                       torch.randn(1, 4))
+    assert torch.equal(out, torch.zeros_like(out))
+
+
+@pytest.mark.parametrize("resolution", [16, 24])
+def test_conv_runs_at_any_resolution_and_learns(resolution):
+    torch.manual_seed(2)
+    model = ModuleA(SMALL)
+    x = torch.randn(1, 3, resolution, resolution)
+    out = model.refine(x, torch.ones(1, 1, resolution, resolution), torch.randn(1, 5, resolution, resolution),
+                       torch.randn(1, 4))
+    out.sum().backward()
+    assert model.refiner.out.weight.grad.abs().sum() > 0  # the zero-started layer gets a gradient

@@ -1,0 +1,102 @@
+"""The per-frame runtime on real identities (Anny body, templates) and a built-in motion."""
+
+import copy
+
+import pytest
+import torch
+
+from hyperbones.errors import ParameterError
+from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.geometry.rotations import rot_z
+from hyperbones.models.hyperbones import HyperBonesModel
+from hyperbones.rig.virtual_bones import bone_transforms
+from hyperbones.runtime.identity import encode_identity
+from hyperbones.runtime.simulator import Simulator
+
+from test_runtime_identity import SMALL
+
+
+@pytest.fixture(scope="module")
+def setup(body):
+    from hyperbones.garment.templates import make_template
+    from hyperbones.motion.builtin import builtin_motion
+
+    torch.manual_seed(0)
+    model = HyperBonesModel(SMALL)
+    with torch.no_grad():
+        identities = [encode_identity(model, make_template(name, body, vertices=1500), body)
+                      for name in ("tshirt", "long-skirt")]
+    motion = builtin_motion("walk", body, duration=1.0)
+    return model, identities, motion
+
+
+def _trained_looking(model):
+    """A copy whose zero-started output layers have weights, as training would give them."""
+    model = copy.deepcopy(model)
+    torch.manual_seed(1)
+    for layer in (model.runtime.bone_net.corrections, model.runtime.refiner.out, model.runtime.modulator.net[-1]):
+        torch.nn.init.normal_(layer.weight, std=0.02)
+    return model
+
+
+def _run(simulator, rotations, roots):
+    return torch.stack([torch.stack(simulator.step(rotations[:, t], roots[:, t]))
+                        for t in range(rotations.shape[1])], dim=1)  # (N,T,V,3) for equal V
+
+
+def test_untrained_runtime_is_virtual_bone_skinning(setup, body):
+    model, identities, motion = setup
+    identity = identities[0]
+    out = _run(Simulator(model.runtime, [identity]), motion.joint_rotations[None], motion.root_translation[None])[0]
+    posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
+    rotations, positions = identity.bones.pose(posed.skinning_transforms)
+    expected = linear_blend_skinning(identity.rest_vertices, identity.weights,
+                                     bone_transforms(identity.bones.rest_positions, rotations, positions))
+    assert torch.allclose(out, expected, atol=1e-4)
+
+
+def test_same_motion_elsewhere_gives_the_same_cloth_motion(setup):
+    """The network works in the character's heading frame: a motion turned about Z and moved
+    gives the turned and moved garment."""
+    model, identities, motion = setup
+    model = _trained_looking(model)
+    turn, shift = rot_z(torch.tensor(2.0)), torch.tensor([3.0, -1.0, 0.0])
+    rotations = motion.joint_rotations[None]
+    roots = motion.root_translation[None]
+    here = _run(Simulator(model.runtime, identities[:1]), rotations, roots)[0]
+    there = _run(Simulator(model.runtime, identities[:1]), turn @ rotations, roots @ turn.T + shift)[0]
+    assert torch.allclose(there, here @ turn.T + shift, atol=2e-4)
+    first = _run(Simulator(model.runtime, identities[:1]), rotations[:, :1], roots[:, :1])[0, 0]
+    assert (here[-1] - first).abs().max() > 0.01  # and the garment did move
+
+
+def test_batched_characters_match_single_ones(setup):
+    model, identities, motion = setup
+    model = _trained_looking(model)
+    rotations = torch.stack([motion.joint_rotations, motion.joint_rotations.flip(0)])
+    roots = torch.stack([motion.root_translation, motion.root_translation.flip(0)])
+    together = Simulator(model.runtime, identities)
+    alone = [Simulator(model.runtime, [identity]) for identity in identities]
+    for t in range(5):
+        both = together.step(rotations[:, t], roots[:, t])
+        for i in range(2):
+            assert torch.allclose(both[i], alone[i].step(rotations[i:i + 1, t], roots[i:i + 1, t])[0], atol=1e-5)
+
+
+def test_reset_forgets_the_motion(setup):
+    model, identities, motion = setup
+    simulator = Simulator(_trained_looking(model).runtime, identities[:1])
+    rotations, roots = motion.joint_rotations[None], motion.root_translation[None]
+    first = simulator.step(rotations[:, 10], roots[:, 10])[0]
+    simulator.step(rotations[:, 11], roots[:, 11])
+    simulator.reset()
+    assert torch.equal(simulator.step(rotations[:, 10], roots[:, 10])[0], first)
+
+
+def test_bad_input(setup):
+    model, identities, _ = setup
+    with pytest.raises(ParameterError, match="at least one identity"):
+        Simulator(model.runtime, [])
+    simulator = Simulator(model.runtime, identities)
+    with pytest.raises(ParameterError, match=r"step expects \(2,31,3,3\)"):
+        simulator.step(torch.eye(3).expand(1, 31, 3, 3), torch.zeros(1, 3))
