@@ -185,11 +185,13 @@ def cmd_eval(args) -> int:
 
 
 def cmd_train(args) -> int:
-    from hyperbones.training.config import TeacherTrainingConfig
+    from hyperbones.training.config import HyperBonesTrainingConfig, load_config
+    from hyperbones.training.joint import JointTrainer
     from hyperbones.training.trainer import TeacherTrainer
 
-    config = TeacherTrainingConfig.load(args.config)
-    trainer = TeacherTrainer(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
+    config = load_config(args.config)
+    kind = JointTrainer if isinstance(config, HyperBonesTrainingConfig) else TeacherTrainer
+    trainer = kind(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
     try:
         step = trainer.train()
     finally:
@@ -325,10 +327,13 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
     evaluation.set_defaults(func=cmd_eval)
 
-    train = sub.add_parser("train", help="train the teacher (Module C) self-supervised with the physics energies",
-                           description="Trains from a TOML config (see configs/teacher*.toml). Writes OUT/checkpoint.pt "
-                                       "(atomic, every train.checkpoint_every steps, config inside) and TensorBoard logs "
-                                       "in OUT/tensorboard. Under torchrun it trains on every process (DDP).")
+    train = sub.add_parser("train", help="train the teacher (phase 1) or all of HyperBones (phase 2), self-supervised",
+                           description="Trains from a TOML config. A config with [model], [data], [train] trains the "
+                                       "teacher (Module C) on the physics energies (configs/teacher*.toml; under "
+                                       "torchrun on every process, DDP); one that also has [runtime] and [joint] "
+                                       "trains Modules A, B and C together from a teacher run (configs/hyperbones*.toml, "
+                                       "one process). Writes OUT/checkpoint.pt (atomic, every train.checkpoint_every "
+                                       "steps, config inside) and TensorBoard logs in OUT/tensorboard.")
     train.add_argument("--config", required=True, help="TOML training config")
     train.add_argument("--out", required=True, help="run folder")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")

@@ -1,7 +1,7 @@
 """The whole HyperBones network: Module C (teacher, with the shared trunk), B and A.
 
-Module B reads the teacher's trunk (the same parameters, not a copy), so physics gradients
-on C shape B's identity encoding (paper Sec. 3.5).
+Module B runs the teacher's trunk (the same parameters, held once, by the teacher) on the
+canonical graph, so physics gradients on C shape B's identity encoding (paper Sec. 3.5).
 """
 
 from __future__ import annotations
@@ -10,8 +10,9 @@ from dataclasses import asdict, dataclass, field
 
 from torch import nn
 
+from hyperbones.models.cloth_graph import ClothGraph
 from hyperbones.models.module_a import ModuleA, ModuleAConfig
-from hyperbones.models.module_b import ModuleB
+from hyperbones.models.module_b import IdentityCode, ModuleB
 from hyperbones.models.teacher import Teacher, TrunkConfig
 
 
@@ -34,12 +35,16 @@ class HyperBonesConfig:
 
 
 class HyperBonesModel(nn.Module):
-    """teacher (Module C), encoder (Module B on the teacher's trunk), runtime (Module A)."""
+    """teacher (Module C, owner of the trunk), encoder (Module B's heads), runtime (Module A)."""
 
     def __init__(self, config: HyperBonesConfig = HyperBonesConfig()):
         super().__init__()
         self.config = config
         self.teacher = Teacher(config.trunk)
-        self.encoder = ModuleB(self.teacher, config.runtime.num_bones, config.runtime.shape_code,
+        self.encoder = ModuleB(config.trunk.latent, config.runtime.num_bones, config.runtime.shape_code,
                                config.runtime.uv_features)
         self.runtime = ModuleA(config.runtime)
+
+    def encode(self, graph: ClothGraph) -> IdentityCode:
+        """Module B: the trunk over the canonical graph, then the heads on the garment nodes."""
+        return self.encoder(self.teacher.encode(graph)[: graph.num_garment])

@@ -1,8 +1,8 @@
 """Module B: the identity encoder (paper Sec. 3.3), run once per body shape × garment.
 
-The canonical graph goes through the trunk shared with the teacher (same weights: physics
-gradients reach it through Module C during training); three heads read the garment nodes'
-latents F_c (V,latent):
+The canonical graph goes through the trunk shared with the teacher (``HyperBonesModel.encode``:
+the teacher's own weights, so physics gradients reach it through Module C during training);
+the three heads here read the garment nodes' latents F_c (V,latent):
 
   shape code z     mean over the garment nodes, then a 2-layer MLP -> (d_z,)
   Δw               per vertex, MLP latent -> 64 -> B: corrections of the log initial weights
@@ -19,8 +19,6 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from hyperbones.models.cloth_graph import ClothGraph
-from hyperbones.models.teacher import Teacher
 
 
 @dataclass
@@ -33,12 +31,10 @@ class IdentityCode:
 
 
 class ModuleB(nn.Module):
-    """Heads over the shared trunk; ``trunk`` is the teacher whose ``encode`` it reuses (not copied)."""
+    """The heads of Module B: garment-node latents (V,latent) of the shared trunk -> ``IdentityCode``."""
 
-    def __init__(self, trunk: Teacher, num_bones: int = 128, shape_code: int = 128, uv_features: int = 32):
+    def __init__(self, latent: int, num_bones: int = 128, shape_code: int = 128, uv_features: int = 32):
         super().__init__()
-        latent = trunk.config.latent
-        self.trunk = trunk
         self.shape_head = nn.Sequential(nn.Linear(latent, shape_code), nn.ReLU(), nn.Linear(shape_code, shape_code))
         self.weight_head = nn.Sequential(nn.Linear(latent, 64), nn.ReLU(), nn.Linear(64, num_bones))
         self.feature_head = nn.Linear(latent, uv_features)
@@ -46,6 +42,5 @@ class ModuleB(nn.Module):
             nn.init.zeros_(layer.weight)
             nn.init.zeros_(layer.bias)
 
-    def forward(self, graph: ClothGraph) -> IdentityCode:
-        latents = self.trunk.encode(graph)[: graph.num_garment]  # (V,latent)
+    def forward(self, latents: torch.Tensor) -> IdentityCode:
         return IdentityCode(self.shape_head(latents.mean(0)), self.weight_head(latents), self.feature_head(latents))

@@ -24,6 +24,7 @@ from hyperbones.rig.virtual_bones import VirtualBones
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
+    from hyperbones.models.cloth_graph import ClothGraph
     from hyperbones.garment.garment import Garment
     from hyperbones.models.hyperbones import HyperBonesModel
 
@@ -89,35 +90,63 @@ class Identity:
                    UvRaster.from_state_dict(payload["raster"])).to(device)
 
 
+@dataclass
+class IdentityGeometry:
+    """What an identity needs that depends on geometry alone: the virtual bones, the UV maps
+    and the canonical graph. Made once; the trainer re-runs only the network on it.
+
+    rest_vertices: (V,3), faces: (F,3), rest_joint_positions: (31,3), graph: the canonical
+    ``ClothGraph`` (on the model's device).
+    """
+
+    name: str
+    rest_vertices: torch.Tensor
+    faces: torch.Tensor
+    rest_joint_positions: torch.Tensor
+    bones: VirtualBones
+    raster: UvRaster
+    graph: ClothGraph
+
+    @classmethod
+    def build(cls, garment: Garment, body: Body, num_bones: int, uv_resolution: int,
+              device: torch.device | str = "cpu", name: str | None = None) -> "IdentityGeometry":
+        from hyperbones.geometry.proximity import BodyProximity
+        from hyperbones.models.cloth_graph import GarmentTopology, canonical_graph
+        from hyperbones.physics.cloth import ClothRest
+
+        bones = VirtualBones.bind(garment, body, num_bones)
+        raster = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices, uv_resolution)
+        rest = ClothRest.from_mesh(garment.vertices, garment.faces, garment.material)
+        topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
+                                         garment.material).to(device)
+        proximity = BodyProximity(body.faces.to(device), device=device)
+        proximity.update(body.rest_vertices.to(device))
+        nearest = proximity.query(garment.vertices.to(device), max_distance=1.0)
+        graph = canonical_graph(topology, body.rest_vertices.to(device), body.faces.to(device), nearest)
+        return cls(name or garment.name, garment.vertices.to(device), garment.faces.to(device),
+                   body.rest_joint_positions.to(device), bones.to(device), raster.to(device), graph)
+
+
+def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry) -> Identity:
+    """Module B on an identity's geometry -> the identity cache (differentiable when grad is on)."""
+    code = model.encode(geometry.graph)
+    weights = torch.softmax(geometry.bones.log_weights + code.weight_corrections, dim=1)
+    film = model.runtime.modulator(code.shape_code[None])[0]
+    features_uv = geometry.raster.rasterize(code.vertex_features[None])[0]
+    return Identity(geometry.name, geometry.rest_vertices, geometry.faces, geometry.rest_joint_positions,
+                    geometry.bones, weights, film, features_uv, geometry.raster)
+
+
 def encode_identity(model: HyperBonesModel, garment: Garment, body: Body, name: str | None = None,
                     uv_resolution: int | None = None) -> Identity:
     """Run Module B for ``garment`` fitted to ``body`` (canonical pose); differentiable when grad is on.
 
     uv_resolution: R of the UV maps (default: the model's training resolution).
-
     The virtual bones and the UV maps depend on geometry alone; the network contributes
     Δw, z (as FiLM parameters) and F_UV.
     """
-    from hyperbones.geometry.proximity import BodyProximity
-    from hyperbones.models.cloth_graph import GarmentTopology, canonical_graph
-    from hyperbones.physics.cloth import ClothRest
-
-    device = next(model.parameters()).device
     config = model.config.runtime
-    bones = VirtualBones.bind(garment, body, config.num_bones)
-    raster = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices,
-                            uv_resolution or config.uv_resolution)
-    rest = ClothRest.from_mesh(garment.vertices, garment.faces, garment.material)
-    topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
-                                     garment.material).to(device)
-    proximity = BodyProximity(body.faces.to(device), device=device)
-    proximity.update(body.rest_vertices.to(device))
-    nearest = proximity.query(garment.vertices.to(device), max_distance=1.0)
-    graph = canonical_graph(topology, body.rest_vertices.to(device), body.faces.to(device), nearest)
-    code = model.encoder(graph)
-    bones, raster = bones.to(device), raster.to(device)
-    weights = torch.softmax(bones.log_weights + code.weight_corrections, dim=1)
-    film = model.runtime.modulator(code.shape_code[None])[0]
-    features_uv = raster.rasterize(code.vertex_features[None])[0]
-    return Identity(name or garment.name, garment.vertices.to(device), garment.faces.to(device),
-                    body.rest_joint_positions.to(device), bones, weights, film, features_uv, raster)
+    device = next(model.parameters()).device
+    geometry = IdentityGeometry.build(garment, body, config.num_bones, uv_resolution or config.uv_resolution,
+                                      device, name)
+    return apply_encoder(model, geometry)

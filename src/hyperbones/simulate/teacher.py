@@ -23,7 +23,7 @@ from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT, GarmentTopology
-from hyperbones.models.teacher import teacher_step
+from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
@@ -31,6 +31,7 @@ from hyperbones.physics.material import Material
 from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.training.checkpoint import SHIPPED_TEACHER
+from hyperbones.training.config import DataConfig
 from hyperbones.training.trainer import QUERY_DISTANCE, pick_device, teacher_from_checkpoint
 
 
@@ -40,13 +41,19 @@ class TeacherMethod:
     name = "teacher"
 
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor, material: Material | None = None,
-                 checkpoint: str | Path | None = None, device: str = "auto", progress: bool = False):
+                 checkpoint: str | Path | None = None, device: str = "auto", progress: bool = False,
+                 model: Teacher | None = None, settle_dt: float | None = None):
+        """``model`` (with ``settle_dt``, the length of the first step) rolls out a teacher in
+        memory, e.g. the one being trained; otherwise ``checkpoint`` (default: the shipped one)."""
         self.device = pick_device(device)
-        if checkpoint is None and not SHIPPED_TEACHER.exists():
-            raise ParameterError("no trained teacher ships with this version yet: train one with `hyperbones train` "
-                                 "and pass --checkpoint FILE")
-        self.model, payload = teacher_from_checkpoint(checkpoint or SHIPPED_TEACHER, self.device)
-        self.settle_dt = float(payload["config"]["data"]["settle_dt"])
+        if model is not None:
+            self.model, self.settle_dt = model, float(settle_dt if settle_dt is not None else DataConfig().settle_dt)
+        else:
+            if checkpoint is None and not SHIPPED_TEACHER.exists():
+                raise ParameterError("no trained teacher ships with this version yet: train one with `hyperbones "
+                                     "train` and pass --checkpoint FILE")
+            self.model, payload = teacher_from_checkpoint(checkpoint or SHIPPED_TEACHER, self.device)
+            self.settle_dt = float(payload["config"]["data"]["settle_dt"])
         material = material or garment.material
         rest = ClothRest.from_mesh(rest_vertices.float(), garment.faces, material)
         self.rest = rest.to(self.device)

@@ -1,8 +1,10 @@
 """The typed training configuration, read from a TOML file and saved into every checkpoint.
 
-A config file has three tables, ``[model]``, ``[data]`` and ``[train]``, with the fields of
-``TrunkConfig``, ``DataConfig`` and ``TrainConfig``; anything left out takes the default
-below. Unknown keys and wrongly typed values are errors that name the file.
+A teacher config has three tables, ``[model]``, ``[data]`` and ``[train]``, with the fields
+of ``TrunkConfig``, ``DataConfig`` and ``TrainConfig``. A HyperBones (joint, phase 2) config
+adds ``[runtime]`` (``ModuleAConfig``) and ``[joint]`` (``JointConfig``); ``load_config``
+tells them apart by the ``[joint]`` table. Anything left out takes the default below.
+Unknown keys and wrongly typed values are errors that name the file.
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from pathlib import Path
 from typing import Any, get_args, get_origin, get_type_hints
 
 from hyperbones.errors import InputFileError
+from hyperbones.models.module_a import ModuleAConfig
 from hyperbones.models.teacher import TrunkConfig
 
 TEMPLATE_NAMES = ("tshirt", "tshirt-open", "pants", "long-skirt", "dress", "tight-dress")
@@ -109,14 +112,62 @@ class TeacherTrainingConfig:
 
     @classmethod
     def load(cls, path: str | Path) -> "TeacherTrainingConfig":
-        path = Path(path)
-        if not path.exists():
-            raise InputFileError(path, "config file not found")
-        try:
-            values = tomllib.loads(path.read_text())
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
-            raise InputFileError(path, f"not valid TOML ({error})") from None
-        return cls.from_dict(values, str(path))
+        config = load_config(path)
+        if not isinstance(config, cls):
+            raise InputFileError(path, f"expected a {cls.__name__.replace('TrainingConfig', '').lower()} config")
+        return config
+
+
+@dataclass(frozen=True)
+class JointConfig:
+    """Phase 2 (paper Sec. 3.5): C keeps training on L_phys while A learns C's rollouts.
+
+    (Phase 2 starts from a phase-1 teacher run through ``train.init_from``: its weights start C
+    and the shared trunk.)
+    cache_size / rollout_frames: A's targets are C's states along ``cache_size`` whole
+        rollouts of ``rollout_frames`` frames each, from the LBS start through the clip
+        (no gradient); ``refresh_every`` steps the oldest is replaced by a new rollout of the
+        current C, so the targets improve with C. ``end_fraction`` of the rollouts end where
+        their clip ends (its hold), so A sees the cloth settle after the body stops.
+    frames_per_step: cached frames A is trained on per optimiser step.
+    position_scale: L_MSE and L_lap are taken in cm² (m² × 1e4) so that a centimetre of error
+        weighs about as much as the energies (joules) of the physics terms.
+    laplacian_weight / interpenetration_weight: λ_lap, λ_interp (paper 0.1; 0 = the ablation);
+        interpenetration_epsilon: ε (m).  physics_on_runtime: stretching, bending and
+        collision (L_phys's weights) on A's output too.
+    """
+
+    cache_size: int = 16
+    rollout_frames: int = 150
+    refresh_every: int = 200
+    end_fraction: float = 0.3
+    frames_per_step: int = 1
+    position_scale: float = 1e4
+    laplacian_weight: float = 0.1
+    interpenetration_weight: float = 0.1
+    interpenetration_epsilon: float = 0.003
+    physics_on_runtime: bool = True
+
+
+@dataclass(frozen=True)
+class HyperBonesTrainingConfig(TeacherTrainingConfig):
+    """The joint config: the teacher's sections plus Module A and phase 2's settings."""
+
+    runtime: ModuleAConfig = ModuleAConfig()
+    joint: JointConfig = JointConfig()
+
+
+def load_config(path: str | Path) -> TeacherTrainingConfig:
+    """A teacher config, or a HyperBones (joint) one when the file has a ``[joint]`` table."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(path, "config file not found")
+    try:
+        values = tomllib.loads(path.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
+        raise InputFileError(path, f"not valid TOML ({error})") from None
+    kind = HyperBonesTrainingConfig if "joint" in values else TeacherTrainingConfig
+    return kind.from_dict(values, str(path))
 
 
 def _build(kind, values: Any, where: str):
@@ -142,6 +193,8 @@ def _coerce(kind, value: Any, where: str):
             raise InputFileError(file, f"{where} must be a table")
         key_kind, value_kind = get_args(kind)
         return {str(k): _coerce(value_kind, v, where) for k, v in value.items()}
+    if kind is bool and isinstance(value, bool):
+        return value
     if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
         return float(value)
     if kind is int and isinstance(value, int) and not isinstance(value, bool):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
@@ -108,7 +108,8 @@ class Identity:
 
     rest: the cloth's rest state (float32); topology: the graph's fixed part;
     skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them);
-    limiter: the strain limiting applied to each step's result (``physics.strain_limit``).
+    limiter: the strain limiting applied to each step's result (``physics.strain_limit``);
+    garment: the ``Garment`` itself at its rest shape on this body (what Module B encodes).
     """
 
     name: str
@@ -117,6 +118,7 @@ class Identity:
     topology: GarmentTopology
     skin_weights: torch.Tensor
     limiter: StrainLimiter
+    garment: Garment | None = None  # the garment carried to this body (UVs, pins, fabric), when known
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
@@ -216,20 +218,28 @@ class TeacherData:
         source = self.sources[(name, vertices)]
         body = Body(self.sample_shape())
         rest_vertices = source.follower.place(body)
-        return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                              source.skin_weights, self.sample_material())
+        material = self.sample_material()
+        identity = Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
+                                  source.skin_weights, material)
+        identity.garment = replace(source.garment.with_vertices(rest_vertices), material=material)
+        return identity
+
+    def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
+        """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),
+        ending where the clip ends (its hold) when ``at_end``; and its root path (T,3)
+        scaled to ``identity``'s leg length."""
+        motion = self.random.choice(self.motions)
+        frames = min(frames, motion.num_frames)
+        start = motion.num_frames - frames if at_end else self.random.randrange(0, motion.num_frames - frames + 1)
+        window = motion.slice(start, start + frames)
+        return window, window.root_translation * (identity.body.leg_length / self.default_body.leg_length)
 
     def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
         """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None)."""
         identity = identity or self.sample_identity()
-        motion = self.random.choice(self.motions)
-        steps = min(steps, motion.num_frames - 2)
-        start = self.random.randrange(0, motion.num_frames - steps - 1)
-        window = motion.slice(start, start + steps + 2)
-        scale = identity.body.leg_length / self.default_body.leg_length
-        root = window.root_translation * scale
+        window, root = self.sample_window(steps + 2, identity)
         if self.random.random() < self.config.airborne_fraction:
             root = root.clone()
             root[:, 2] += ballistic_hops(window.num_frames, window.fps, self.random, self.config.hop_speeds)
         posed = identity.body.pose(window.joint_rotations, root)
-        return Episode(identity, posed.vertices, identity.skin(posed.skinning_transforms), motion.name)
+        return Episode(identity, posed.vertices, identity.skin(posed.skinning_transforms), window.name)

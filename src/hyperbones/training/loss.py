@@ -45,3 +45,47 @@ def physics_terms(positions_next: torch.Tensor, positions: torch.Tensor, velocit
         "collision": collision_energy(positions_next, origin, normal, eps=COLLISION_EPSILON, weight=collision_weight),
         "friction": friction_energy(positions_next, positions, follow_next, follow_now, normal, rest),
     }
+
+
+def laplacian(values: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
+    """(V,C) per-vertex values, (E,2) undirected edges -> (V,C) value minus the mean of its neighbours."""
+    both_s = torch.cat([edges[:, 0], edges[:, 1]])
+    both_r = torch.cat([edges[:, 1], edges[:, 0]])
+    total = torch.zeros_like(values).index_add_(0, both_r, values[both_s])
+    count = torch.zeros(values.shape[0], device=values.device, dtype=values.dtype).index_add_(
+        0, both_r, torch.ones_like(both_r, dtype=values.dtype))
+    return values - total / count.clamp_min(1)[:, None]
+
+
+def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Tensor, rest: ClothRest,
+                  nearest: Nearest, body: torch.Tensor, body_faces: torch.Tensor, collision_weight: float,
+                  config) -> dict[str, torch.Tensor]:
+    """Module A's loss for one frame (paper Sec. 3.5): L_3D against C plus physics on A's output.
+
+    positions: (V,3) A's garment; target: (V,3) C's (no gradient); edges: (E,2) garment edges;
+    nearest: body faces found for ``positions`` on ``body`` (Vb,3) at that frame;
+    config: ``JointConfig``.
+
+    L_3D = MSE + λ_lap·L_lap + λ_interp·L_interp, each a mean over vertices with lengths in
+    centimetres (``position_scale``). L_lap is taken on the error A − C: it punishes the
+    per-vertex ripples that sparse bones leave, and is zero when A matches C (on A's
+    positions alone it would also punish every fold C makes). L_interp = mean max(0, ε − d)²
+    with d the signed distance to the nearest body face's plane.
+    """
+    scale = config.position_scale
+    error = positions - target.detach()
+    origin, normal = face_planes(body, body_faces, nearest.face)
+    distance = ((positions - origin) * normal).sum(-1)
+    touching = normal.square().sum(-1) > 0
+    inside = (config.interpenetration_epsilon - distance).clamp_min(0) * touching
+    terms = {
+        "a_mse": error.square().sum(-1).mean() * scale,
+        "a_laplacian": config.laplacian_weight * laplacian(error, edges).square().sum(-1).mean() * scale,
+        "a_interpenetration": config.interpenetration_weight * inside.square().mean() * scale,
+    }
+    if config.physics_on_runtime:
+        terms["a_stretching"] = stretching_energy(positions, rest)
+        terms["a_bending"] = bending_energy(positions, rest)
+        terms["a_collision"] = collision_energy(positions, origin, normal, eps=COLLISION_EPSILON,
+                                                weight=collision_weight)
+    return terms

@@ -63,6 +63,8 @@ def rollout_length(step: int, config) -> int:
 class TeacherTrainer:
     """Owns the model, optimiser, data, logs and checkpoints of one run directory."""
 
+    label = "teacher"  # the progress bar's name of what trains
+
     def __init__(self, config: TeacherTrainingConfig, run_dir: str | Path, resume: bool = False,
                  progress: bool = True, max_steps: int | None = None):
         self.config = config
@@ -77,7 +79,7 @@ class TeacherTrainer:
         self.max_steps = max_steps
         torch.manual_seed(config.train.seed + self.rank)
 
-        self.model = Teacher(config.model).to(self.device)
+        self.model = self._build_model().to(self.device)
         self.optimizer = torch.optim.Adam(self.model.parameters(), lr=config.train.learning_rate)
         self.step = 0
         self.ema: dict[str, torch.Tensor] | None = None  # the weights' moving average (train.ema_decay)
@@ -85,7 +87,7 @@ class TeacherTrainer:
         episode_seed = config.train.seed * 1000 + self.rank
         if resume and self.checkpoint_path.exists():
             payload = load_checkpoint(self.checkpoint_path, map_location=self.device)
-            if TeacherTrainingConfig.from_dict(payload["config"], str(self.checkpoint_path)).as_dict() != config.as_dict():
+            if type(config).from_dict(payload["config"], str(self.checkpoint_path)).as_dict() != config.as_dict():
                 raise ParameterError(f"{self.checkpoint_path}: --resume with a different config than the run's")
             self.model.load_state_dict(payload["model"])
             self.optimizer.load_state_dict(payload["optimizer"])
@@ -98,7 +100,8 @@ class TeacherTrainer:
             self._initialise_from(Path(config.train.init_from))
         if self.ema is None:
             self.ema = {name: value.detach().clone() for name, value in self.model.state_dict().items()}
-        self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.model)
+        # What each simulation step calls: Module C, wrapped for DDP when training on several ranks.
+        self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.teacher)
         self.data = TeacherData(config.data, seed=episode_seed,
                                 progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
         self.proximity = BodyProximity(self.data.default_body.faces, device=self.device)
@@ -113,6 +116,15 @@ class TeacherTrainer:
         self._k = 0
         self._state = None
         self._limiter = None  # the episode's strain limiter, on this rank's device
+
+    def _build_model(self) -> torch.nn.Module:
+        """The module the optimiser trains (here the teacher alone)."""
+        return Teacher(self.config.model)
+
+    @property
+    def teacher(self) -> Teacher:
+        """Module C inside the trained module."""
+        return self.model
 
     def _join_device(self) -> str:
         """This rank's device and the process-group backend: NCCL with one GPU per process;
@@ -132,11 +144,34 @@ class TeacherTrainer:
         if payload["config"]["model"] != self.config.as_dict()["model"]:
             raise ParameterError(f"{path}: train.init_from has model {payload['config']['model']}, "
                                  f"this config {self.config.as_dict()['model']}")
-        self.model.load_state_dict(payload["model"])
+        self.teacher.load_state_dict(payload["model"])
 
     # -- one optimiser step -------------------------------------------------------------
     def _advance(self) -> dict[str, float]:
-        """One simulation step of the current episode (a new episode when it has run out)."""
+        """One optimiser step: the teacher's physics terms (plus ``_extra_terms``), summed."""
+        terms, logs = self._teacher_terms()
+        terms.update(self._extra_terms())
+        loss = sum(terms.values())
+        learning_rate = learning_rate_at(self.step, self.config.train)
+        for group in self.optimizer.param_groups:
+            group["lr"] = learning_rate
+        self.optimizer.zero_grad(set_to_none=True)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), self.config.train.grad_clip)
+        if torch.isfinite(grad_norm):
+            self.optimizer.step()  # every rank sees the same averaged gradient, so all skip together
+            self._update_average()
+        logs.update({name: float(value.detach()) for name, value in terms.items()})
+        logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), learning_rate=learning_rate)
+        return logs
+
+    def _extra_terms(self) -> dict[str, torch.Tensor]:
+        """Loss terms added to the teacher's in the same step (none here; the joint trainer's A terms)."""
+        return {}
+
+    def _teacher_terms(self) -> tuple[dict[str, torch.Tensor], dict[str, float]]:
+        """One simulation step of the current episode (a new episode when it has run out):
+        L_phys's terms on the raw prediction, and the constrained, detached state carried on."""
         cfg = self.config
         if self._episode is None or self._k >= self._episode.num_steps:
             self._episode = self.data.sample_episode(rollout_length(self.step, cfg.train))
@@ -174,19 +209,9 @@ class TeacherTrainer:
                                      cfg.train.collision_ramp_steps)
         terms = physics_terms(positions_next, positions, velocities, rest, nearest, body_now, body_next,
                               self.body_faces, weight, dt)
-        loss = sum(terms.values())
-        learning_rate = learning_rate_at(self.step, cfg.train)
-        for group in self.optimizer.param_groups:
-            group["lr"] = learning_rate
-        self.optimizer.zero_grad(set_to_none=True)
-        loss.backward()
-        grad_norm = torch.nn.utils.clip_grad_norm_(self.model.parameters(), cfg.train.grad_clip)
-        if torch.isfinite(grad_norm):
-            self.optimizer.step()  # every rank sees the same averaged gradient, so all skip together
-            self._update_average()
         self._k += 1
         if torch.isfinite(positions_next).all():
-            # The loss saw the raw prediction; the state carried on gets the runtime's strain
+            # The loss sees the raw prediction; the state carried on gets the runtime's strain
             # limiting and hard contact.
             positions_next, velocities_next = constrain_step(
                 positions_next.detach(), velocities_next.detach(), self._limiter, self.proximity, nearest, body_next,
@@ -196,12 +221,10 @@ class TeacherTrainer:
                 velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)
             self._state = (positions_next, velocities_next)
         else:
-            self._episode = None  # a blown-up episode is dropped; the loss already pushed against it
-        logs = {name: float(value.detach()) for name, value in terms.items()}
-        logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), collision_weight=weight,
-                    learning_rate=learning_rate,
-                    rollout=rollout_length(self.step, cfg.train), settle=float(self._k == 0))
-        return logs
+            self._episode = None  # a blown-up episode is dropped; the loss still pushes against it
+        logs = {"collision_weight": weight, "rollout": rollout_length(self.step, cfg.train),
+                "settle": float(self._k == 0)}
+        return terms, logs
 
     @torch.no_grad()
     def _update_average(self) -> None:
@@ -217,7 +240,7 @@ class TeacherTrainer:
     # -- the loop -----------------------------------------------------------------------
     def train(self) -> int:
         total = self.config.train.steps if self.max_steps is None else min(self.config.train.steps, self.max_steps)
-        bar = tqdm(total=total, initial=self.step, desc="train teacher", disable=not self.progress, unit="step")
+        bar = tqdm(total=total, initial=self.step, desc=f"train {self.label}", disable=not self.progress, unit="step")
         started, first_step = time.perf_counter(), self.step
         running = {}
         try:

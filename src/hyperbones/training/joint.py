@@ -1,0 +1,87 @@
+"""Phase 2 of ``hyperbones train`` (paper Sec. 3.5): Modules A, B and C trained together.
+
+Every optimiser step sums
+  - C's physics terms on its own episode (exactly the teacher trainer's step), and
+  - A's terms on ``joint.frames_per_step`` frames drawn from a cache of C's whole rollouts
+    (``training.rollouts``): Module B encodes the frame's identity (through the trunk C
+    uses, so both losses train it), Module A predicts the garment from the bone window,
+    and ``runtime_terms`` compares it with C's state there.
+The rollout cache is rebuilt from the current C when a run resumes (it is not saved).
+One process only (no DDP).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import torch
+
+from hyperbones.errors import ParameterError
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.models.hyperbones import HyperBonesConfig, HyperBonesModel
+from hyperbones.models.module_a import heading_frame
+from hyperbones.models.teacher import Teacher
+from hyperbones.runtime.identity import apply_encoder
+from hyperbones.runtime.simulator import module_a_frame
+from hyperbones.training.config import HyperBonesTrainingConfig
+from hyperbones.training.loss import collision_weight_at, runtime_terms
+from hyperbones.training.rollouts import RolloutCache
+from hyperbones.training.trainer import QUERY_DISTANCE, TeacherTrainer
+
+INITIAL_ROLLOUTS = 4  # made before the first step; the cache then grows by one per refresh
+
+
+class JointTrainer(TeacherTrainer):
+    """The teacher trainer's loop and checkpoints, with Modules A and B added to each step."""
+
+    label = "hyperbones"
+
+    def __init__(self, config: HyperBonesTrainingConfig, run_dir: str | Path, resume: bool = False,
+                 progress: bool = True, max_steps: int | None = None):
+        if int(os.environ.get("WORLD_SIZE", "1")) > 1:
+            raise ParameterError("joint (HyperBones) training runs on one process; start it without torchrun")
+        super().__init__(config, run_dir, resume=resume, progress=progress, max_steps=max_steps)
+        self.cache = RolloutCache(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
+                                  self.device, config.data.settle_dt)
+        self.runtime_proximity = BodyProximity(self.data.default_body.faces, device=self.device)
+
+    def _build_model(self) -> torch.nn.Module:
+        return HyperBonesModel(HyperBonesConfig(self.config.model, self.config.runtime))
+
+    @property
+    def teacher(self) -> Teacher:
+        return self.model.teacher
+
+    def _extra_terms(self) -> dict[str, torch.Tensor]:
+        joint = self.config.joint
+        if not self.cache.rollouts:
+            if self.progress:
+                print("preparing teacher rollouts for Module A", flush=True)
+            for _ in range(min(INITIAL_ROLLOUTS, joint.cache_size)):
+                self.cache.refresh(self.teacher, self.step)
+        elif self.step % joint.refresh_every == 0:
+            self.cache.refresh(self.teacher, self.step)  # grows until full, then replaces the oldest
+        weight = collision_weight_at(self.step, self.config.train.collision_weight_start,
+                                     self.config.train.collision_weight_end, self.config.train.collision_ramp_steps)
+        totals: dict[str, torch.Tensor] = {}
+        for _ in range(joint.frames_per_step):
+            for name, value in self._runtime_frame_terms(weight).items():
+                totals[name] = totals.get(name, 0.0) + value / joint.frames_per_step
+        return totals
+
+    def _runtime_frame_terms(self, collision_weight: float) -> dict[str, torch.Tensor]:
+        """Module B then A on one cached frame, against C's garment there."""
+        rollout, t = self.cache.sample()
+        device = self.device
+        identity = apply_encoder(self.model, rollout.geometry)
+        rotations, positions = identity.bones.pose(rollout.skinning[t - 2: t + 1].to(device))  # (3,B,3,3), (3,B,3)
+        to_local = heading_frame(rollout.joint_rotations[t, 0].to(device), rollout.root_translation[t].to(device))
+        garment = module_a_frame(self.model.runtime, [identity], positions[None], rotations[-1:], positions[-1:],
+                                 to_local[None])[0]
+        body = rollout.body_vertices[t].to(device)
+        self.runtime_proximity.update(body)
+        nearest = self.runtime_proximity.query(garment.detach(), max_distance=QUERY_DISTANCE)
+        return runtime_terms(garment, rollout.positions[t].to(device), rollout.edges.to(device),
+                             rollout.physics.rest.to(device), nearest, body, self.body_faces, collision_weight,
+                             self.config.joint)

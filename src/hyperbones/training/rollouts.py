@@ -1,0 +1,93 @@
+"""A's targets in phase 2: whole rollouts of the teacher (Module C), kept and refreshed.
+
+Each rollout is C run without gradient from the LBS start (after its settling step) over a
+training clip on a random identity, as ``hyperbones simulate --method teacher`` runs it, so
+A learns C's lag, swing and settling along a whole motion, not only a few steps from an LBS
+pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the current C.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from hyperbones.models.teacher import Teacher
+from hyperbones.runtime.identity import IdentityGeometry
+from hyperbones.simulate.teacher import TeacherMethod
+from hyperbones.training.config import JointConfig
+from hyperbones.training.data import Identity as PhysicsIdentity
+from hyperbones.training.data import TeacherData
+
+
+@dataclass
+class TeacherRollout:
+    """C along one clip on one identity (T frames).
+
+    physics: the identity's cloth (rest state, body, carried garment).
+    geometry: its virtual bones, UV maps and canonical graph (what Module B reads).
+    joint_rotations: (T,31,3,3); root_translation: (T,3); skinning: (T,31,4,4);
+    body_vertices: (T,Vb,3); positions: (T,V,3) C's garment; edges: (E,2) the garment's
+    edges; step: when it was made.
+    """
+
+    physics: PhysicsIdentity
+    geometry: IdentityGeometry
+    joint_rotations: torch.Tensor
+    root_translation: torch.Tensor
+    skinning: torch.Tensor
+    body_vertices: torch.Tensor
+    positions: torch.Tensor
+    edges: torch.Tensor
+    motion: str
+    step: int
+
+    @property
+    def num_frames(self) -> int:
+        return self.positions.shape[0]
+
+
+class RolloutCache:
+    """Up to ``config.cache_size`` teacher rollouts; ``sample`` draws a (rollout, frame) pair."""
+
+    def __init__(self, data: TeacherData, config: JointConfig, num_bones: int, uv_resolution: int,
+                 device: torch.device, settle_dt: float):
+        self.data, self.config = data, config
+        self.num_bones, self.uv_resolution = num_bones, uv_resolution
+        self.device, self.settle_dt = device, settle_dt
+        self.rollouts: list[TeacherRollout] = []
+
+    def make(self, teacher: Teacher, step: int) -> TeacherRollout:
+        """One new rollout of ``teacher`` (put in eval mode for it: its input statistics stay as they are)."""
+        data = self.data
+        identity = data.sample_identity()
+        at_end = data.random.random() < self.config.end_fraction
+        window, root = data.sample_window(self.config.rollout_frames, identity, at_end=at_end)
+        posed = identity.body.pose(window.joint_rotations, root)
+        garment = identity.garment
+        was_training = teacher.training
+        teacher.eval()
+        try:
+            method = TeacherMethod(garment, identity.body, garment.vertices, garment.material, model=teacher,
+                                   settle_dt=self.settle_dt, device=str(self.device))
+            positions = method.run(posed)
+        finally:
+            teacher.train(was_training)
+        geometry = IdentityGeometry.build(garment, identity.body, self.num_bones, self.uv_resolution, self.device,
+                                          name=identity.name)
+        return TeacherRollout(identity, geometry, window.joint_rotations, root, posed.skinning_transforms,
+                              posed.vertices, positions, garment.edges(), window.name, step)
+
+    def refresh(self, teacher: Teacher, step: int) -> TeacherRollout:
+        """Add a rollout, dropping the oldest when the cache is full."""
+        rollout = self.make(teacher, step)
+        if len(self.rollouts) >= self.config.cache_size:
+            oldest = min(range(len(self.rollouts)), key=lambda i: self.rollouts[i].step)
+            self.rollouts.pop(oldest)
+        self.rollouts.append(rollout)
+        return rollout
+
+    def sample(self) -> tuple[TeacherRollout, int]:
+        """A cached rollout and a frame t >= 2 of it (A's window needs t−2 and t−1)."""
+        rollout = self.data.random.choice(self.rollouts)
+        return rollout, self.data.random.randrange(2, rollout.num_frames)

@@ -1,0 +1,82 @@
+"""hyperbones train, phase 2: Modules A, B and C in one step, from a phase-1 run, on a tiny garment."""
+
+import pytest
+import torch
+
+from hyperbones.errors import InputFileError
+from hyperbones.training.checkpoint import load_checkpoint
+from hyperbones.training.config import HyperBonesTrainingConfig, JointConfig, TeacherTrainingConfig, load_config
+from hyperbones.training.joint import JointTrainer
+from hyperbones.training.loss import laplacian
+from hyperbones.training.trainer import TeacherTrainer
+
+from test_training_trainer import TINY
+
+TINY_JOINT = {**TINY, "runtime": {"num_bones": 16, "shape_code": 16, "hidden": 32, "uv_features": 4,
+                                  "uv_resolution": 16, "conv_channels": [8, 16, 8]},
+              "joint": {"cache_size": 2, "rollout_frames": 6, "refresh_every": 2}}
+
+
+def test_laplacian_of_a_linear_field_vanishes_inside():
+    # A 3×3 grid of vertices: the centre's neighbours average to it for a linear field.
+    xy = torch.stack(torch.meshgrid(torch.arange(3.0), torch.arange(3.0), indexing="ij"), -1).reshape(-1, 2)
+    edges = torch.tensor([[i, i + 1] for i in range(9) if i % 3 < 2] + [[i, i + 3] for i in range(6)])
+    values = xy @ torch.tensor([[2.0], [-1.0]])
+    assert laplacian(values, edges)[4].abs().item() < 1e-6
+    assert laplacian(values, edges)[0].abs().item() > 0.1  # a corner sees only one side
+
+
+def test_config_kinds(tmp_path):
+    joint = tmp_path / "joint.toml"
+    joint.write_text("[model]\nlatent = 16\n[runtime]\nuv_resolution = 64\nuse_conv = false\n"
+                     "[joint]\nlaplacian_weight = 0.0\n")
+    config = load_config(joint)
+    assert isinstance(config, HyperBonesTrainingConfig)
+    assert config.runtime.uv_resolution == 64 and config.runtime.use_conv is False
+    assert config.joint.laplacian_weight == 0.0 and config.joint.interpenetration_weight == JointConfig().interpenetration_weight
+    teacher = tmp_path / "teacher.toml"
+    teacher.write_text("[model]\nlatent = 16\n")
+    assert type(load_config(teacher)) is TeacherTrainingConfig
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[runtime]\nuse_conv = 1\n[joint]\n")
+    with pytest.raises(InputFileError, match="use_conv must be bool"):
+        load_config(bad)
+
+
+def test_joint_steps_from_a_teacher_run(tmp_path, body):
+    teacher_run = tmp_path / "teacher"
+    phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=2)
+    phase_one.train()
+    phase_one.close()
+
+    values = {**TINY_JOINT, "train": {**TINY["train"], "init_from": str(teacher_run / "checkpoint.pt")}}
+    config = HyperBonesTrainingConfig.from_dict(values)
+    trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=3)
+    taught = load_checkpoint(teacher_run / "checkpoint.pt")["model"]
+    assert all(torch.equal(trainer.teacher.state_dict()[k], v) for k, v in taught.items())
+    runtime_before = [p.detach().clone() for p in trainer.model.runtime.parameters()]
+    encoder_before = [p.detach().clone() for p in trainer.model.encoder.parameters()]
+
+    logs = trainer._advance()
+    assert len(trainer.cache.rollouts) == 2  # filled up to the cache size before the first step
+    for name in ("stretching", "collision", "a_mse", "a_laplacian", "a_interpenetration", "a_stretching"):
+        assert name in logs and torch.isfinite(torch.tensor(logs[name]))
+    assert logs["a_mse"] > 0
+    # One step moved Module A and Module B's heads (their output layers start at zero).
+    assert any(not torch.equal(a, b) for a, b in zip(runtime_before, trainer.model.runtime.parameters()))
+    assert any(not torch.equal(a, b) for a, b in zip(encoder_before, trainer.model.encoder.parameters()))
+    rollout = trainer.cache.rollouts[0]
+    assert rollout.positions.shape == (rollout.num_frames, rollout.geometry.rest_vertices.shape[0], 3)
+    assert torch.isfinite(rollout.positions).all()
+
+    trainer.step += 1
+    first_made = {id(r) for r in trainer.cache.rollouts}
+    assert trainer.train() == 3  # the step-2 refresh replaces the oldest rollout
+    trainer.close()
+    assert len(trainer.cache.rollouts) == 2 and {id(r) for r in trainer.cache.rollouts} != first_made
+    payload = load_checkpoint(tmp_path / "joint" / "checkpoint.pt")
+    assert payload["step"] == 3 and payload["config"]["joint"]["cache_size"] == 2
+    assert any(k.startswith("runtime.") for k in payload["model"]) and any(k.startswith("encoder.") for k in payload["model"])
+    resumed = JointTrainer(config, tmp_path / "joint", resume=True, progress=False, max_steps=4)
+    assert resumed.train() == 4
+    resumed.close()
