@@ -45,6 +45,15 @@ class HyperBonesModel(nn.Module):
                                config.runtime.uv_features)
         self.runtime = ModuleA(config.runtime)
 
+    @classmethod
+    def from_payload(cls, payload: dict) -> "HyperBonesModel":
+        """The model of a joint training checkpoint (its weights' moving average when it keeps
+        one), in eval mode. payload: ``training.checkpoint.load_checkpoint``'s result."""
+        config = payload["config"]
+        model = cls(HyperBonesConfig.from_dict({"trunk": config["model"], "runtime": config["runtime"]}))
+        model.load_state_dict(payload.get("ema") or payload["model"])
+        return model.eval()
+
     def encode(self, graph: ClothGraph) -> IdentityCode:
         """Module B: the trunk over the canonical graph, then the heads on the garment nodes."""
         return self.encoder(self.teacher.encode(graph)[: graph.num_garment])

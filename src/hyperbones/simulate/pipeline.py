@@ -32,7 +32,13 @@ def _teacher(*args, **kwargs):
     return TeacherMethod(*args, **kwargs)
 
 
-METHODS = {"lbs": LbsMethod, "teacher": _teacher}
+def _hyperbones(*args, **kwargs):
+    from hyperbones.simulate.hyperbones import HyperBonesMethod
+
+    return HyperBonesMethod(*args, **kwargs)
+
+
+METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones}
 """Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
 the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)

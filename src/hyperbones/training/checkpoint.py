@@ -19,6 +19,9 @@ from hyperbones.io_utils import atomic_path
 SHIPPED_TEACHER = Path(__file__).resolve().parent.parent / "checkpoints" / "teacher.pt"
 """The committed teacher (``hyperbones simulate --method teacher`` loads it by default)."""
 
+SHIPPED_HYPERBONES = SHIPPED_TEACHER.with_name("hyperbones.pt")
+"""The shipped HyperBones model (``--method hyperbones`` and ``Simulator.load`` default to it)."""
+
 
 def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     path = Path(path)

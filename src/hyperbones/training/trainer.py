@@ -284,10 +284,13 @@ class TeacherTrainer:
 
 def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[Teacher, dict]:
     """The teacher model (eval mode; the weights' moving average when the checkpoint keeps
-    one) and the checkpoint's payload."""
+    one) and the checkpoint's payload. A joint (HyperBones) checkpoint gives its Module C."""
     payload = load_checkpoint(path, map_location=device)
     model = Teacher(TrunkConfig(**payload["config"]["model"])).to(device)
-    model.load_state_dict(payload.get("ema") or payload["model"])
+    state = payload.get("ema") or payload["model"]
+    if "runtime" in payload["config"]:
+        state = {name[len("teacher."):]: value for name, value in state.items() if name.startswith("teacher.")}
+    model.load_state_dict(state)
     model.eval()
     return model, payload
 

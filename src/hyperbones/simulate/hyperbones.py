@@ -1,0 +1,63 @@
+"""``--method hyperbones``: the per-frame runtime (Module A) on a cached identity (Module B)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import torch
+from tqdm import tqdm
+
+from hyperbones.body.anny_body import Body, PosedBody
+from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.garment.garment import Garment
+from hyperbones.models.hyperbones import HyperBonesModel
+from hyperbones.physics.material import Material
+from hyperbones.runtime.identity import encode_identity
+from hyperbones.runtime.simulator import Simulator
+from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
+from hyperbones.training.trainer import pick_device
+
+
+def hyperbones_from_checkpoint(path: str | Path | None = None, device: str | torch.device = "cpu") -> HyperBonesModel:
+    """The HyperBones model of a joint training checkpoint or an exported one (default: the shipped one)."""
+    if path is None:
+        if not SHIPPED_HYPERBONES.exists():
+            raise ParameterError("no trained HyperBones model ships with this version yet: train one with "
+                                 "`hyperbones train --config configs/hyperbones-small.toml` and pass --checkpoint FILE")
+        path = SHIPPED_HYPERBONES
+    payload = load_checkpoint(path, map_location=device)
+    if "runtime" not in payload["config"]:
+        raise InputFileError(path, "a teacher checkpoint, not a HyperBones one (its config has no [runtime] table)")
+    return HyperBonesModel.from_payload(payload).to(device)
+
+
+class HyperBonesMethod:
+    """Garment positions from the per-frame runtime: Module B once, then Module A per frame."""
+
+    name = "hyperbones"
+
+    def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor | None = None,
+                 material: Material | None = None, checkpoint: str | Path | None = None, device: str = "auto",
+                 progress: bool = False, uv_resolution: int | None = None):
+        self.device = pick_device(device)
+        model = hyperbones_from_checkpoint(checkpoint, self.device)
+        garment = replace(garment, material=material or garment.material)
+        with torch.no_grad():
+            identity = encode_identity(model, garment, body, uv_resolution=uv_resolution)
+        self.simulator = Simulator(model.runtime, [identity], self.device)
+        self.progress = progress
+
+    def run(self, posed: PosedBody) -> torch.Tensor:
+        """(T frames of a posed body) -> (T,V,3) garment positions on the CPU."""
+        frames = self.frames(posed)
+        return torch.stack([frame.cpu() for frame in tqdm(frames, total=posed.joint_rotations.shape[0],
+                                                         desc="hyperbones", disable=not self.progress, unit="frame")])
+
+    def frames(self, posed: PosedBody) -> Iterator[torch.Tensor]:
+        """Yield each frame's (V,3) garment positions as it is computed (the motion starts at rest)."""
+        self.simulator.reset()
+        roots = posed.joint_positions[:, 0]
+        for t in range(posed.joint_rotations.shape[0]):
+            yield self.simulator.step(posed.joint_rotations[t:t + 1], roots[t:t + 1])[0]
