@@ -86,20 +86,3 @@ def test_joint_steps_from_a_teacher_run(tmp_path, body):
     assert resumed.train() == 4
     resumed.close()
 
-
-def test_simulate_with_a_joint_checkpoint(tmp_path, body):
-    """The hyperbones method (and the teacher inside the same checkpoint) through simulate."""
-    from hyperbones.simulate.pipeline import run_simulation
-
-    config = HyperBonesTrainingConfig.from_dict(TINY_JOINT)
-    trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=1)
-    trainer.train()
-    trainer.close()
-    checkpoint = str(tmp_path / "joint" / "checkpoint.pt")
-    result = run_simulation("hyperbones", "tshirt", "walk", vertices=1000, frames=8, checkpoint=checkpoint,
-                            device="cpu")
-    assert result.garment_vertices.shape == (8, result.garment.num_vertices, 3)
-    assert torch.isfinite(result.garment_vertices).all()
-    assert result.metrics["method"] == "hyperbones"
-    teacher = run_simulation("teacher", "tshirt", "walk", vertices=1000, frames=3, checkpoint=checkpoint, device="cpu")
-    assert torch.isfinite(teacher.garment_vertices).all()

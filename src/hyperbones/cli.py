@@ -214,11 +214,14 @@ def cmd_bench(args) -> int:
     import json
 
     from hyperbones.io_utils import atomic_path
-    from hyperbones.runtime.bench import bench, bench_table, records_as_dicts
+    from hyperbones.runtime.bench import bench, bench_table, records_as_dicts, speedups
 
     records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
-                    device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint, progress=not args.quiet)
+                    device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint,
+                    uv_resolution=args.uv_resolution, progress=not args.quiet)
     print(bench_table(records))
+    for line in speedups(records):
+        print(line)
     if args.json:
         with atomic_path(args.json) as tmp:
             tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
@@ -353,14 +356,19 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Times each method frame by frame on the default body walking, after a warm-up "
                                        "(CUDA timings synchronised). Prints a table; --json writes records "
                                        "{method, garment, vertices, device, batch, ms_per_frame}.")
-    bench.add_argument("--methods", default="lbs,teacher", help="comma list (default: lbs,teacher)")
+    bench.add_argument("--methods", default="lbs,teacher", help="comma list of lbs, teacher, hyperbones "
+                                                                "(default: lbs,teacher)")
     bench.add_argument("--garments", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
                        help="comma list of garments (default: the six templates)")
     bench.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
     bench.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     bench.add_argument("--frames", type=int, default=30, help="timed frames per run (default 30)")
     bench.add_argument("--warmup", type=int, default=5, help="untimed frames first (default 5)")
-    bench.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the shipped one)")
+    bench.add_argument("--checkpoint", default=None,
+                       help="checkpoint for the learnt methods (a HyperBones one holds its teacher too; "
+                            "default: the shipped ones)")
+    bench.add_argument("--uv-resolution", type=int, default=None,
+                       help="UV map size R for hyperbones (default: the one it was trained at)")
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(func=cmd_bench)

@@ -35,8 +35,12 @@ class BenchRecord:
 
 
 def bench(methods: list[str], garments: list[str], *, vertices: int | None = None, device: str = "auto",
-          frames: int = 30, warmup: int = 5, checkpoint: str | None = None, progress: bool = True) -> list[BenchRecord]:
-    """Time ``frames`` frames after ``warmup`` for each method × garment; one record each."""
+          frames: int = 30, warmup: int = 5, checkpoint: str | None = None, uv_resolution: int | None = None,
+          progress: bool = True) -> list[BenchRecord]:
+    """Time ``frames`` frames after ``warmup`` for each method × garment; one record each.
+
+    uv_resolution: the UV maps' R for the hyperbones method (default: its training one).
+    """
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ParameterError(f"unknown method(s) {unknown}; available: {', '.join(METHODS)}")
@@ -50,8 +54,9 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
     for garment_name in tqdm(garments, desc="bench", disable=not progress):
         garment, rest_vertices = draped_garment(garment_name, body, vertices=vertices)
         for method in methods:
+            extra = {"uv_resolution": uv_resolution} if method == "hyperbones" else {}
             solver = METHODS[method](garment, body, rest_vertices=rest_vertices, material=garment.material,
-                                     checkpoint=checkpoint, device=str(the_device))
+                                     checkpoint=checkpoint, device=str(the_device), **extra)
             times = []
             stream = solver.frames(posed)
             for index in range(warmup + frames):
@@ -76,6 +81,13 @@ def bench_table(records: list[BenchRecord]) -> str:
     lines += [f"| {r.method} | {r.garment} | {r.vertices} | {r.device} | {r.batch} | {r.ms_per_frame:.2f} |"
               for r in records]
     return "\n".join(lines)
+
+
+def speedups(records: list[BenchRecord], fast: str = "hyperbones", slow: str = "teacher") -> list[str]:
+    """One line per garment timed with both methods: how many times faster ``fast`` is."""
+    timed = {(r.method, r.garment, r.vertices, r.device): r.ms_per_frame for r in records}
+    return [f"{fast} is {timed[(slow, g, v, d)] / ms:.1f}x faster than the {slow} on {g} ({v} vertices, {d})"
+            for (method, g, v, d), ms in timed.items() if method == fast and (slow, g, v, d) in timed]
 
 
 def records_as_dicts(records: list[BenchRecord]) -> list[dict]:
