@@ -229,6 +229,18 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_check_hem(args) -> int:
+    from hyperbones.simulate.hem import hem_curves, hem_table, plot_hem
+
+    curves = hem_curves(_comma_list(args.methods), args.garment, args.motion, hold=args.hold, vertices=args.vertices,
+                        body=args.body, checkpoint=args.checkpoint, device=args.device,
+                        source_fps=dict(args.source_fps or []))
+    print(hem_table(curves))
+    out = plot_hem(curves, args.out, f"{args.garment} hem after {args.motion} stops")
+    print(f"wrote {out.resolve()}")
+    return 0
+
+
 def cmd_check_teacher(args) -> int:
     from hyperbones.simulate.stability import settling_table, stability_table
 
@@ -391,6 +403,22 @@ def build_parser() -> argparse.ArgumentParser:
     _add_source_fps_pairs(check_teacher)
     check_teacher.add_argument("--quiet", action="store_true", help="no progress bars")
     check_teacher.set_defaults(func=cmd_check_teacher)
+
+    check_hem = sub.add_parser("check-hem", help="does the hem keep swinging after the body stops? table + PNG",
+                               description="Simulates the garment through the motion and a hold with each method, "
+                                           "then reports how long the hem (lowest 5 %% of the garment) keeps moving "
+                                           "after the body stops and plots its displacement to --out.")
+    check_hem.add_argument("--methods", default="lbs,teacher,hyperbones", help="comma list (default: all three)")
+    check_hem.add_argument("--garment", default="dress", help="garment (default: dress)")
+    check_hem.add_argument("--motion", default="walk", help="clip that ends with the stop (default: walk)")
+    check_hem.add_argument("--hold", type=float, default=2.0, help="seconds of stillness after it (default 2)")
+    check_hem.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
+    check_hem.add_argument("--body", default=None, help=BODY_HELP)
+    check_hem.add_argument("--checkpoint", default=None, help="checkpoint for the learnt methods (default: shipped)")
+    check_hem.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
+    check_hem.add_argument("--out", default="hem.png", help="PNG to write (default: hem.png)")
+    _add_source_fps_pairs(check_hem)
+    check_hem.set_defaults(func=cmd_check_hem)
 
     garment = sub.add_parser("garment", help="make the built-in garments")
     garment_sub = garment.add_subparsers(dest="garment_command", metavar="ACTION", required=True)
