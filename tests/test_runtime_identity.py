@@ -39,7 +39,8 @@ def test_contents(identity):
 def test_save_load_round_trip(identity, tmp_path):
     loaded = Identity.load(identity.save(tmp_path / "tshirt.identity.pt"))
     assert loaded.name == identity.name
-    for name in ("rest_vertices", "faces", "weights", "film", "features_uv", "rest_joint_positions"):
+    for name in ("rest_vertices", "faces", "weights", "film", "features_uv", "rest_joint_positions",
+                 "vertex_features", "uvs", "face_uvs"):
         assert torch.equal(getattr(loaded, name), getattr(identity, name))
     assert torch.equal(loaded.bones.log_weights, identity.bones.log_weights)
     x = torch.randn(1, identity.num_vertices, 3)
@@ -54,6 +55,11 @@ def test_other_resolution(body, identity):
     with torch.no_grad():
         other = encode_identity(model, make_template("tshirt", body, vertices=1500), body, uv_resolution=16)
     assert other.features_uv.shape == (4, 16, 16) and other.raster.resolution == 16
+    # A cache rebuilds its UV maps at another resolution from f_v and the atlas.
+    rebuilt = identity.at_resolution(16)
+    assert rebuilt.raster.resolution == 16 and rebuilt.features_uv.shape == (4, 16, 16)
+    again = identity.at_resolution(32)
+    assert again is identity
 
 
 def test_bad_files(tmp_path):
@@ -65,5 +71,5 @@ def test_bad_files(tmp_path):
         Identity.load(junk)
     other = tmp_path / "other.pt"
     torch.save({"version": 99}, other)
-    with pytest.raises(InputFileError, match="not a version-1"):
+    with pytest.raises(InputFileError, match="not a version-2"):
         Identity.load(other)

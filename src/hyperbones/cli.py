@@ -214,7 +214,8 @@ def cmd_bench(args) -> int:
     import json
 
     from hyperbones.io_utils import atomic_path
-    from hyperbones.runtime.bench import bench, bench_table, records_as_dicts, speedups
+    from hyperbones.runtime.bench import bench
+    from hyperbones.runtime.timing import bench_table, records_as_dicts, speedups
 
     records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
                     device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint,
@@ -238,6 +239,25 @@ def cmd_check_hem(args) -> int:
     print(hem_table(curves))
     out = plot_hem(curves, args.out, f"{args.garment} hem after {args.motion} stops")
     print(f"wrote {out.resolve()}")
+    return 0
+
+
+def cmd_bench_runtime(args) -> int:
+    import json
+
+    from hyperbones.io_utils import atomic_path
+    from hyperbones.runtime.bench_runtime import bench_runtime
+    from hyperbones.runtime.timing import bench_table, records_as_dicts
+
+    records = bench_runtime(args.identity, args.motion, checkpoint=args.checkpoint, uv_resolution=args.uv_resolution,
+                            device=args.device, batch=args.batch, frames=args.frames, warmup=args.warmup)
+    print(bench_table(records))
+    if not args.checkpoint:
+        print("(Module A freshly initialised: timing only)")
+    if args.json:
+        with atomic_path(args.json) as tmp:
+            tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
+        print(f"wrote {Path(args.json).resolve()}")
     return 0
 
 
@@ -384,6 +404,22 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(func=cmd_bench)
+
+    bench_rt = sub.add_parser("bench-runtime", help="ms per frame of the per-frame runtime on saved identity caches",
+                              description="Times Simulator.step (Module A) on identity caches (Identity.save) over a "
+                                          "motion .npz (hyperbones motion NAME --out FILE), BATCH characters at once; "
+                                          "needs neither the body model nor the teacher. Prints a table; --json writes "
+                                          "the records.")
+    bench_rt.add_argument("--identity", action="append", required=True, help="an identity cache (repeatable)")
+    bench_rt.add_argument("--motion", required=True, help="motion .npz from `hyperbones motion`")
+    bench_rt.add_argument("--checkpoint", default=None, help="HyperBones checkpoint (default: untrained weights)")
+    bench_rt.add_argument("--uv-resolution", type=int, default=None, help="UV size R (default: the cache's)")
+    bench_rt.add_argument("--device", default="cpu", help="cpu or cuda (default cpu)")
+    bench_rt.add_argument("--batch", type=int, default=1, help="characters stepped together (default 1)")
+    bench_rt.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
+    bench_rt.add_argument("--warmup", type=int, default=10, help="untimed frames first (default 10)")
+    bench_rt.add_argument("--json", default=None, help="also write the records to this JSON file")
+    bench_rt.set_defaults(func=cmd_bench_runtime)
 
     check_teacher = sub.add_parser("check-teacher", help="tables of long-rollout stability and settling of a learnt method",
                                    description="Rolls the method out for --frames frames on each motion (held still "

@@ -182,7 +182,10 @@ class UvRaster:
         return cls(int(state["resolution"]), matrix("raster"), matrix("sampler"), state["coverage"])
 
     def to(self, device: torch.device | str) -> "UvRaster":
-        return UvRaster(self.resolution, self.raster.to(device), self.sampler.to(device), self.coverage.to(device))
+        with warnings.catch_warnings():  # moving a CSR matrix builds it anew without invariant checks
+            warnings.filterwarnings("ignore", message="Sparse invariant checks are implicitly disabled")
+            return UvRaster(self.resolution, self.raster.to(device), self.sampler.to(device),
+                            self.coverage.to(device))
 
     def rasterize(self, values: torch.Tensor) -> torch.Tensor:
         """(N,V,C) per-vertex values -> (N,C,R,R) images."""

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import statistics
 import time
-from dataclasses import asdict, dataclass
 
 import torch
 from tqdm import tqdm
@@ -21,17 +20,8 @@ from hyperbones.errors import ParameterError
 from hyperbones.motion.load import load_motion
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.pipeline import METHODS
+from hyperbones.runtime.timing import BenchRecord, synchronize
 from hyperbones.training.trainer import pick_device
-
-
-@dataclass
-class BenchRecord:
-    method: str
-    garment: str
-    vertices: int
-    device: str
-    batch: int
-    ms_per_frame: float
 
 
 def bench(methods: list[str], garments: list[str], *, vertices: int | None = None, device: str = "auto",
@@ -60,35 +50,12 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
             times = []
             stream = solver.frames(posed)
             for index in range(warmup + frames):
-                _synchronize(the_device)
+                synchronize(the_device)
                 start = time.perf_counter()
                 next(stream)
-                _synchronize(the_device)
+                synchronize(the_device)
                 if index >= warmup:
                     times.append(1000.0 * (time.perf_counter() - start))
             records.append(BenchRecord(method, garment_name, garment.num_vertices, the_device.type, 1,
                                        statistics.median(times)))
     return records
-
-
-def _synchronize(device: torch.device) -> None:
-    if device.type == "cuda":
-        torch.cuda.synchronize(device)
-
-
-def bench_table(records: list[BenchRecord]) -> str:
-    lines = ["| method | garment | vertices | device | batch | ms/frame |", "|---|---|---:|---|---:|---:|"]
-    lines += [f"| {r.method} | {r.garment} | {r.vertices} | {r.device} | {r.batch} | {r.ms_per_frame:.2f} |"
-              for r in records]
-    return "\n".join(lines)
-
-
-def speedups(records: list[BenchRecord], fast: str = "hyperbones", slow: str = "teacher") -> list[str]:
-    """One line per garment timed with both methods: how many times faster ``fast`` is."""
-    timed = {(r.method, r.garment, r.vertices, r.device): r.ms_per_frame for r in records}
-    return [f"{fast} is {timed[(slow, g, v, d)] / ms:.1f}x faster than the {slow} on {g} ({v} vertices, {d})"
-            for (method, g, v, d), ms in timed.items() if method == fast and (slow, g, v, d) in timed]
-
-
-def records_as_dicts(records: list[BenchRecord]) -> list[dict]:
-    return [asdict(r) for r in records]

@@ -11,7 +11,7 @@ It can be saved and loaded (``torch.load(weights_only=True)``).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
     from hyperbones.garment.garment import Garment
     from hyperbones.models.hyperbones import HyperBonesModel
 
-IDENTITY_VERSION = 1
+IDENTITY_VERSION = 2
 
 
 @dataclass
@@ -40,6 +40,8 @@ class Identity:
     bones: the virtual bones.  weights: (V,B) garment-from-bone weights (rows sum to 1).
     film: (layers,2,hidden) FiLM scales and shifts of Bone-Net.
     features_uv: (d_f,R,R) F_UV.  raster: the UV atlas maps at resolution R.
+    vertex_features: (V,d_f) f_v, and uvs (U,2), face_uvs (F,3) the atlas: ``at_resolution``
+    rebuilds the UV maps at another R from them.
     """
 
     name: str
@@ -51,6 +53,9 @@ class Identity:
     film: torch.Tensor
     features_uv: torch.Tensor
     raster: UvRaster
+    vertex_features: torch.Tensor
+    uvs: torch.Tensor
+    face_uvs: torch.Tensor
 
     @property
     def num_vertices(self) -> int:
@@ -59,7 +64,18 @@ class Identity:
     def to(self, device: torch.device | str) -> "Identity":
         return Identity(self.name, self.rest_vertices.to(device), self.faces.to(device),
                         self.rest_joint_positions.to(device), self.bones.to(device), self.weights.to(device),
-                        self.film.to(device), self.features_uv.to(device), self.raster.to(device))
+                        self.film.to(device), self.features_uv.to(device), self.raster.to(device),
+                        self.vertex_features.to(device), self.uvs.to(device), self.face_uvs.to(device))
+
+    def at_resolution(self, resolution: int) -> "Identity":
+        """The same identity with its UV maps (and F_UV) rebuilt at ``resolution``."""
+        if resolution == self.raster.resolution:
+            return self
+        device = self.rest_vertices.device
+        raster = UvRaster.build(self.faces.cpu(), self.uvs.cpu(), self.face_uvs.cpu(), self.num_vertices,
+                                resolution).to(device)
+        features_uv = raster.rasterize(self.vertex_features[None])[0]
+        return replace(self, raster=raster, features_uv=features_uv)
 
     def save(self, path: str | Path) -> Path:
         """Write the cache atomically (plain tensors; sparse maps as COO index/value pairs)."""
@@ -68,6 +84,7 @@ class Identity:
             "faces": self.faces, "rest_joint_positions": self.rest_joint_positions,
             "bones": self.bones.state_dict(), "weights": self.weights, "film": self.film,
             "features_uv": self.features_uv, "raster": self.raster.state_dict(),
+            "vertex_features": self.vertex_features, "uvs": self.uvs, "face_uvs": self.face_uvs,
         }
         path = Path(path)
         with atomic_path(path) as tmp:
@@ -87,7 +104,8 @@ class Identity:
             raise InputFileError(path, f"not a version-{IDENTITY_VERSION} hyperbones identity cache")
         return cls(payload["name"], payload["rest_vertices"], payload["faces"], payload["rest_joint_positions"],
                    VirtualBones(**payload["bones"]), payload["weights"], payload["film"], payload["features_uv"],
-                   UvRaster.from_state_dict(payload["raster"])).to(device)
+                   UvRaster.from_state_dict(payload["raster"]), payload["vertex_features"], payload["uvs"],
+                   payload["face_uvs"]).to(device)
 
 
 @dataclass
@@ -106,6 +124,8 @@ class IdentityGeometry:
     bones: VirtualBones
     raster: UvRaster
     graph: ClothGraph
+    uvs: torch.Tensor
+    face_uvs: torch.Tensor
 
     @classmethod
     def build(cls, garment: Garment, body: Body, num_bones: int, uv_resolution: int,
@@ -124,7 +144,8 @@ class IdentityGeometry:
         nearest = proximity.query(garment.vertices.to(device), max_distance=1.0)
         graph = canonical_graph(topology, body.rest_vertices.to(device), body.faces.to(device), nearest)
         return cls(name or garment.name, garment.vertices.to(device), garment.faces.to(device),
-                   body.rest_joint_positions.to(device), bones.to(device), raster.to(device), graph)
+                   body.rest_joint_positions.to(device), bones.to(device), raster.to(device), graph,
+                   garment.uvs.to(device), garment.face_uvs.to(device))
 
 
 def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry) -> Identity:
@@ -134,7 +155,8 @@ def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry) -> Identit
     film = model.runtime.modulator(code.shape_code[None])[0]
     features_uv = geometry.raster.rasterize(code.vertex_features[None])[0]
     return Identity(geometry.name, geometry.rest_vertices, geometry.faces, geometry.rest_joint_positions,
-                    geometry.bones, weights, film, features_uv, geometry.raster)
+                    geometry.bones, weights, film, features_uv, geometry.raster, code.vertex_features,
+                    geometry.uvs, geometry.face_uvs)
 
 
 def encode_identity(model: HyperBonesModel, garment: Garment, body: Body, name: str | None = None,

@@ -15,9 +15,9 @@ from __future__ import annotations
 import torch
 
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
-from hyperbones.errors import ParameterError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.models.module_a import ModuleA, bone_window_features, correct_bones, heading_frame
+from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_window_features, correct_bones, heading_frame
 from hyperbones.rig.virtual_bones import bone_transforms
 from hyperbones.runtime.identity import Identity
 
@@ -27,6 +27,23 @@ WINDOW = 3  # frames t−2, t−1, t
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
     """(...,4,4) affine maps, (...,P,3) points -> (...,P,3) (each map applied to its P points)."""
     return points @ transform[..., :3, :3].transpose(-1, -2) + transform[..., None, :3, 3]
+
+
+def load_module_a(path, device: str | torch.device = "cpu") -> ModuleA:
+    """Module A alone from a HyperBones checkpoint (all the per-frame runtime needs with
+    identity caches; no teacher, Warp or Anny), in eval mode."""
+    from hyperbones.training.checkpoint import load_checkpoint
+
+    payload = load_checkpoint(path, map_location=device)
+    if "runtime" not in payload["config"]:
+        raise InputFileError(path, "a teacher checkpoint, not a HyperBones one (its config has no [runtime] table)")
+    runtime = dict(payload["config"]["runtime"])
+    runtime["conv_channels"] = tuple(runtime["conv_channels"])
+    module = ModuleA(ModuleAConfig(**runtime))
+    state = payload.get("ema") or payload["model"]
+    module.load_state_dict({name[len("runtime."):]: value for name, value in state.items()
+                            if name.startswith("runtime.")})
+    return module.to(device).eval()
 
 
 def module_a_frame(module_a: ModuleA, identities: list[Identity], window: torch.Tensor, rotations: torch.Tensor,

@@ -1,0 +1,80 @@
+"""``hyperbones bench-runtime``: the per-frame runtime alone, on saved identity caches.
+
+Needs only Module A, identity caches (``Identity.save``) and a motion ``.npz`` (``hyperbones
+motion NAME --out FILE``): no body model, teacher or Warp, so it runs wherever torch does
+(a deployment target, a GPU machine). Each identity is stepped through the motion, ``batch``
+copies at once (one ``Simulator`` over ``batch`` characters); the first ``warmup`` frames
+are not timed, then the median of the per-frame times is reported (CUDA synchronised).
+Without a checkpoint, Module A's weights are freshly initialised: the timing is the same.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.models.module_a import ModuleA, ModuleAConfig
+from hyperbones.runtime.identity import Identity
+from hyperbones.runtime.simulator import Simulator, load_module_a
+from hyperbones.runtime.timing import BenchRecord, synchronize
+
+
+def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
+    """(T,31,3,3) rotations from the A-pose and (T,3) root positions of a ``hyperbones motion`` .npz."""
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(path, "motion file not found")
+    try:
+        with np.load(path) as data:
+            rotations = torch.from_numpy(data["joint_rotations_from_apose"]).float()
+            roots = torch.from_numpy(data["root_translation"]).float()
+    except (OSError, ValueError, KeyError) as error:
+        raise InputFileError(path, f"not a hyperbones motion .npz ({type(error).__name__}: {error})") from None
+    return rotations, roots
+
+
+def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | None = None,
+                  uv_resolution: int | None = None, device: str = "cpu", batch: int = 1, frames: int = 60,
+                  warmup: int = 10) -> list[BenchRecord]:
+    """One record per identity cache: median ms per frame (for the whole batch) of ``Simulator.step``."""
+    if batch < 1 or frames < 1 or warmup < 0:
+        raise ParameterError("--batch and --frames must be >= 1, --warmup >= 0")
+    the_device = torch.device(device)
+    if the_device.type == "cuda" and not torch.cuda.is_available():
+        raise ParameterError("--device cuda asked for, but CUDA is not available")
+    rotations, roots = load_motion_npz(motion)
+    if rotations.shape[0] < warmup + frames:
+        raise ParameterError(f"{motion}: {rotations.shape[0]} frames, fewer than --warmup + --frames")
+    records = []
+    for path in identity_paths:
+        identity = Identity.load(path)
+        resolution = uv_resolution or identity.raster.resolution
+        identity = identity.at_resolution(resolution)
+        if checkpoint:
+            module_a = load_module_a(checkpoint)
+        else:
+            torch.manual_seed(0)
+            layers, _, hidden = identity.film.shape  # the Bone-Net the cache was made for
+            module_a = ModuleA(ModuleAConfig(num_bones=identity.bones.num_bones, hidden=hidden, layers=layers,
+                                             uv_features=identity.vertex_features.shape[1],
+                                             uv_resolution=resolution))
+        simulator = Simulator(module_a, [identity] * batch, the_device)
+        times = []
+        for t in range(warmup + frames):
+            step_rotations = rotations[t].expand(batch, 31, 3, 3).to(the_device)
+            step_roots = roots[t].expand(batch, 3).to(the_device)
+            synchronize(the_device)
+            start = time.perf_counter()
+            simulator.step(step_rotations, step_roots)
+            synchronize(the_device)
+            if t >= warmup:
+                times.append(1000.0 * (time.perf_counter() - start))
+        records.append(BenchRecord(f"hyperbones@{resolution}", identity.name, identity.num_vertices,
+                                   the_device.type, batch, statistics.median(times)))
+    return records
+

@@ -1,0 +1,43 @@
+"""bench-runtime: the per-frame runtime timed on saved identity caches and a motion .npz."""
+
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from hyperbones.cli import main
+from hyperbones.errors import InputFileError
+from hyperbones.models.hyperbones import HyperBonesModel
+from hyperbones.runtime.bench_runtime import load_motion_npz
+from hyperbones.runtime.identity import encode_identity
+from test_runtime_identity import SMALL
+
+
+def test_bench_runtime_command(tmp_path, body, capsys):
+    from hyperbones.garment.templates import make_template
+
+    torch.manual_seed(0)
+    with torch.no_grad():
+        identity = encode_identity(HyperBonesModel(SMALL), make_template("dress", body, vertices=1500), body)
+    cache = identity.save(tmp_path / "dress.pt")
+    motion = tmp_path / "walk.npz"
+    assert main(["motion", "walk", "--out", str(motion)]) == 0
+    rotations, roots = load_motion_npz(motion)
+    assert rotations.shape[1:] == (31, 3, 3) and roots.shape == (rotations.shape[0], 3)
+    out = tmp_path / "rt.json"
+    assert main(["bench-runtime", "--identity", str(cache), "--motion", str(motion), "--uv-resolution", "16",
+                 "--batch", "2", "--frames", "3", "--warmup", "1", "--json", str(out)]) == 0
+    (record,) = json.loads(out.read_text())
+    assert record["method"] == "hyperbones@16" and record["batch"] == 2 and record["ms_per_frame"] > 0
+    assert record["vertices"] == identity.num_vertices and record["garment"] == "dress"
+    assert "timing only" in capsys.readouterr().out
+
+
+def test_bad_motion_file(tmp_path):
+    bad = tmp_path / "bad.npz"
+    np.savez(bad, something=np.zeros(3))
+    with pytest.raises(InputFileError, match="bad.npz: not a hyperbones motion .npz"):
+        load_motion_npz(bad)
+    with pytest.raises(InputFileError, match="motion file not found"):
+        load_motion_npz(tmp_path / "none.npz")
