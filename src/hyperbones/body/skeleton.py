@@ -58,7 +58,8 @@ def forward_kinematics(
     """World joint-head positions of a posed skeleton.
 
     Args:
-        rest_joint_positions: (31,3) joint heads in the canonical A-pose.
+        rest_joint_positions: (31,3) joint heads in the canonical A-pose, or (T,31,3): one
+            skeleton per row (several characters posed at once).
         joint_rotations: (T,31,3,3) world rotations relative to the A-pose.
         root_translation: (T,3) world position of the Hips head.
 
@@ -68,8 +69,8 @@ def forward_kinematics(
     heads = [root_translation]
     for child in range(1, NUM_JOINTS):
         parent = JOINT_PARENTS[child]
-        offset = rest_joint_positions[child] - rest_joint_positions[parent]
-        heads.append(heads[parent] + joint_rotations[:, parent] @ offset)
+        offset = rest_joint_positions[..., child, :] - rest_joint_positions[..., parent, :]
+        heads.append(heads[parent] + (joint_rotations[:, parent] @ offset[..., None]).squeeze(-1))
     return torch.stack(heads, dim=1)
 
 
@@ -81,7 +82,7 @@ def skinning_transforms(
     """Transforms that carry rest-pose points to the posed skeleton.
 
     Args:
-        rest_joint_positions: (31,3) rest joint heads.
+        rest_joint_positions: (31,3) rest joint heads, or (T,31,3) one skeleton per row.
         joint_rotations: (T,31,3,3) world rotations relative to the A-pose.
         joint_positions: (T,31,3) posed joint heads (from forward_kinematics).
 

@@ -99,11 +99,21 @@ class VirtualBones:
             rotations (...,B,3,3) and positions (...,B,3): bone b maps a rest point x to
             rotations_b (x − rest_positions_b) + positions_b.
         """
-        rows = skinning_transforms[..., :3, :].flatten(-2)  # (...,J,12)
-        blended = (self.joint_weights @ rows).unflatten(-1, (3, 4))  # (...,B,3,4)
-        positions = (blended[..., :3] @ self.rest_positions[..., None]).squeeze(-1) + blended[..., 3]
-        rotations = roma.special_gramschmidt(blended[..., :3, :2])
-        return rotations, positions
+        return pose_bones(self.joint_weights, self.rest_positions, skinning_transforms)
+
+
+def pose_bones(joint_weights: torch.Tensor, rest_positions: torch.Tensor,
+               skinning_transforms: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """``VirtualBones.pose`` on explicit tensors, also batched over characters.
+
+    joint_weights (...,B,J), rest_positions (...,B,3), skinning_transforms (...,J,4,4)
+    -> rotations (...,B,3,3), positions (...,B,3).
+    """
+    rows = skinning_transforms[..., :3, :].flatten(-2)  # (...,J,12)
+    blended = (joint_weights @ rows).unflatten(-1, (3, 4))  # (...,B,3,4)
+    positions = (blended[..., :3] @ rest_positions[..., None]).squeeze(-1) + blended[..., 3]
+    rotations = roma.special_gramschmidt(blended[..., :3, :2])
+    return rotations, positions
 
 
 def bone_transforms(rest_positions: torch.Tensor, rotations: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:

@@ -1,9 +1,11 @@
 """The per-frame runtime: Module A on cached identities, several characters per batch.
 
-Per frame and character the cost is fixed: forward kinematics of 31 joints, the bones'
-skinning blend, one Bone-Net pass (batched over characters), one (V,B)@(B,12) garment
-skinning, two sparse products to and from the UV image and the Conv-MLP (batched). No
-state but the last three frames of bone positions, so it does not grow with the motion.
+Per frame and character the cost is fixed: forward kinematics of 31 joints and the bones'
+skinning blend (on the CPU for all characters at once: a few hundred numbers, which on a
+GPU would cost more in kernel launches than in work), one Bone-Net pass (batched over
+characters), one (V,B)@(B,12) garment skinning, two sparse products to and from the UV
+image and the Conv-MLP (batched). No state but the last three frames of bone positions, so
+it does not grow with the motion.
 
     sim = Simulator(model, [identity])          # or Simulator.from_checkpoint(path, ...)
     for rotations, root in motion_frames:       # (31,3,3), (3,) per character
@@ -18,7 +20,7 @@ from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_window_features, correct_bones, heading_frame
-from hyperbones.rig.virtual_bones import bone_transforms
+from hyperbones.rig.virtual_bones import bone_transforms, pose_bones
 from hyperbones.runtime.identity import Identity
 
 WINDOW = 3  # frames t−2, t−1, t
@@ -103,6 +105,10 @@ class Simulator:
         self.device = torch.device(device)
         self.module_a = module_a.to(self.device).eval()
         self.identities = [identity.to(self.device) for identity in identities]
+        # The skeleton -> bones stage of every character, stacked, on the CPU.
+        self.rest_joints = torch.stack([identity.rest_joint_positions.cpu() for identity in identities])  # (N,31,3)
+        self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
+        self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
         self.window: torch.Tensor | None = None  # (N,3,B,3) world bone positions
 
     def reset(self) -> None:
@@ -117,19 +123,15 @@ class Simulator:
         if joint_rotations.shape != (count, 31, 3, 3) or root_translation.shape != (count, 3):
             raise ParameterError(f"step expects ({count},31,3,3) rotations and ({count},3) roots, got "
                                  f"{tuple(joint_rotations.shape)} and {tuple(root_translation.shape)}")
-        rotations_in = joint_rotations.to(self.device, torch.float32)
-        roots = root_translation.to(self.device, torch.float32)
-        bone_rotations, bone_positions = [], []
-        for i, identity in enumerate(self.identities):
-            joints = forward_kinematics(identity.rest_joint_positions, rotations_in[i:i + 1], roots[i:i + 1])
-            transforms = skinning_transforms(identity.rest_joint_positions, rotations_in[i:i + 1], joints)
-            rotation, position = identity.bones.pose(transforms)
-            bone_rotations.append(rotation[0])
-            bone_positions.append(position[0])
-        rotations, positions = torch.stack(bone_rotations), torch.stack(bone_positions)
+        rotations_in = joint_rotations.detach().to("cpu", torch.float32)
+        roots = root_translation.detach().to("cpu", torch.float32)
+        joints = forward_kinematics(self.rest_joints, rotations_in, roots)
+        transforms = skinning_transforms(self.rest_joints, rotations_in, joints)  # (N,31,4,4)
+        rotations, positions = pose_bones(self.bone_joint_weights, self.bone_rest, transforms)
+        to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
+        rotations, positions = rotations.to(self.device), positions.to(self.device)
         if self.window is None:
             self.window = positions[:, None].expand(count, WINDOW, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        to_local = heading_frame(rotations_in[:, 0], roots)
         return module_a_frame(self.module_a, self.identities, self.window, rotations, positions, to_local)
