@@ -86,3 +86,10 @@ def test_joint_steps_from_a_teacher_run(tmp_path, body):
     assert resumed.train() == 4
     resumed.close()
 
+    # A teacher run can start from a joint checkpoint: it takes that checkpoint's Module C.
+    teacher_values = {**TINY, "train": {**TINY["train"], "init_from": str(tmp_path / "joint" / "checkpoint.pt")}}
+    again = TeacherTrainer(TeacherTrainingConfig.from_dict(teacher_values), tmp_path / "teacher2", progress=False)
+    joint_state = load_checkpoint(tmp_path / "joint" / "checkpoint.pt")["model"]
+    assert all(torch.equal(value, joint_state[f"teacher.{name}"]) for name, value in again.teacher.state_dict().items())
+    again.close()
+

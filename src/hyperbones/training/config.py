@@ -65,8 +65,9 @@ class TrainConfig:
     """Optimisation (HOOD's: Adam 5e-5, grad-norm clip 1, collision weight ramp, rollouts 1 → 5).
 
     init_from: a training checkpoint (path relative to the folder the command runs in) whose
-        model weights and input statistics a new run starts from, with a fresh optimiser and
-        step 0; its model section must match this config's. Empty: random initialisation.
+        teacher weights and input statistics a new run starts from, with a fresh optimiser and
+        step 0 (a joint checkpoint gives its Module C); its model section must match this
+        config's. Empty: random initialisation.
     learning_rate_halve_at: steps at which the learning rate halves (a staircase decay).
     ema_decay: the checkpoint also keeps an exponential moving average of the weights with
         this decay per step, and inference loads it (single steps of the one-step physics

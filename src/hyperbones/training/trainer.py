@@ -144,7 +144,7 @@ class TeacherTrainer:
         if payload["config"]["model"] != self.config.as_dict()["model"]:
             raise ParameterError(f"{path}: train.init_from has model {payload['config']['model']}, "
                                  f"this config {self.config.as_dict()['model']}")
-        self.teacher.load_state_dict(payload["model"])
+        self.teacher.load_state_dict(teacher_state(payload, average=False))
 
     # -- one optimiser step -------------------------------------------------------------
     def _advance(self) -> dict[str, float]:
@@ -282,17 +282,24 @@ class TeacherTrainer:
             dist.destroy_process_group()
 
 
+def teacher_state(payload: dict, average: bool = True) -> dict[str, torch.Tensor]:
+    """The teacher's state dict in a checkpoint's payload: the weights' moving average when
+    ``average`` and the checkpoint keeps one, else the weights; Module C's part of a joint
+    (HyperBones) checkpoint."""
+    state = (payload.get("ema") if average else None) or payload["model"]
+    if "runtime" in payload["config"]:
+        state = {name[len("teacher."):]: value for name, value in state.items() if name.startswith("teacher.")}
+    return state
+
+
 def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[Teacher, dict]:
     """The teacher model (eval mode; the weights' moving average when the checkpoint keeps
     one) and the checkpoint's payload. A joint (HyperBones) checkpoint gives its Module C."""
     payload = load_checkpoint(path, map_location=device)
     model = Teacher(TrunkConfig(**payload["config"]["model"])).to(device)
-    state = payload.get("ema") or payload["model"]
-    if "runtime" in payload["config"]:
-        state = {name[len("teacher."):]: value for name, value in state.items() if name.startswith("teacher.")}
-    model.load_state_dict(state)
+    model.load_state_dict(teacher_state(payload))
     model.eval()
     return model, payload
 
 
-__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "rollout_length"]
+__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "teacher_state", "rollout_length"]
