@@ -34,6 +34,18 @@ def test_bench_runtime_command(tmp_path, body, capsys):
     assert "timing only" in capsys.readouterr().out
 
 
+def test_identity_command_writes_a_cache(tmp_path, capsys):
+    from hyperbones.runtime.identity import Identity
+
+    out = tmp_path / "tshirt.pt"
+    assert main(["identity", "--garment", "tshirt", "--vertices", "1000", "--untrained", "--uv-resolution", "32",
+                 "--out", str(out)]) == 0
+    assert "untrained: for timing only" in capsys.readouterr().out
+    identity = Identity.load(out)
+    assert identity.raster.resolution == 32 and identity.bones.num_bones == 128
+    assert main(["identity", "--untrained", "--checkpoint", "x.pt", "--out", str(out)]) == 2
+
+
 def test_bad_motion_file(tmp_path):
     bad = tmp_path / "bad.npz"
     np.savez(bad, something=np.zeros(3))

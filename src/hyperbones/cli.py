@@ -9,7 +9,7 @@ import time
 import warnings
 from pathlib import Path
 
-from hyperbones.errors import HyperbonesError
+from hyperbones.errors import HyperbonesError, ParameterError
 
 BODY_HELP = ("body shape as phenotype values in [0,1]: gender, age, muscle, weight, height, proportions, "
              "e.g. 'gender=0.2,weight=0.8' (default: all 0.5)")
@@ -242,6 +242,36 @@ def cmd_check_hem(args) -> int:
     return 0
 
 
+def cmd_identity(args) -> int:
+    import torch
+
+    from hyperbones.body.anny_body import body_for
+    from hyperbones.body.shape import BodyShape
+    from hyperbones.physics.material import Material
+    from hyperbones.runtime.identity import encode_identity
+    from hyperbones.simulate.garments import draped_garment
+    from hyperbones.simulate.hyperbones import hyperbones_from_checkpoint
+
+    if args.untrained and args.checkpoint:
+        raise ParameterError("--untrained and --checkpoint exclude each other")
+    body = body_for(BodyShape.parse(args.body))
+    garment, _ = draped_garment(args.garment, body, vertices=args.vertices, piece=args.piece,
+                                material=Material.parse(args.material))
+    if args.untrained:
+        from hyperbones.models.hyperbones import HyperBonesModel
+
+        torch.manual_seed(0)
+        model = HyperBonesModel().eval()
+    else:
+        model = hyperbones_from_checkpoint(args.checkpoint)
+    with torch.no_grad():
+        identity = encode_identity(model, garment, body, uv_resolution=args.uv_resolution)
+    out = identity.save(args.out)
+    print(f"wrote {out.resolve()} ({identity.num_vertices} vertices, {identity.bones.num_bones} bones, "
+          f"UV {identity.raster.resolution}²{', untrained: for timing only' if args.untrained else ''})")
+    return 0
+
+
 def cmd_bench_runtime(args) -> int:
     import json
 
@@ -404,6 +434,22 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(func=cmd_bench)
+
+    identity = sub.add_parser("identity", help="encode a body x garment once (Module B) and save the identity cache",
+                              description="Drapes the garment on the body, runs Module B and writes the cache the "
+                                          "per-frame runtime loads (Identity.load, bench-runtime --identity).")
+    identity.add_argument("--garment", default="dress", help="template name, .obj or .mhclo (default: dress)")
+    identity.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")
+    identity.add_argument("--piece", type=int, default=None, help="piece of a multi-piece MakeHuman outfit")
+    identity.add_argument("--body", default=None, help=BODY_HELP)
+    identity.add_argument("--material", default=None,
+                          help="cloth as k=v pairs, as simulate --material (default: HOOD's)")
+    identity.add_argument("--checkpoint", default=None, help="HyperBones checkpoint (default: the shipped one)")
+    identity.add_argument("--untrained", action="store_true",
+                          help="freshly initialised networks instead of a checkpoint (for timing only)")
+    identity.add_argument("--uv-resolution", type=int, default=None, help="UV size R (default: the model's)")
+    identity.add_argument("--out", required=True, help="output .pt")
+    identity.set_defaults(func=cmd_identity)
 
     bench_rt = sub.add_parser("bench-runtime", help="ms per frame of the per-frame runtime on saved identity caches",
                               description="Times Simulator.step (Module A) on identity caches (Identity.save) over a "
