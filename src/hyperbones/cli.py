@@ -399,9 +399,10 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Trains from a TOML config. A config with [model], [data], [train] trains the "
                                        "teacher (Module C) on the physics energies (configs/teacher*.toml; under "
                                        "torchrun on every process, DDP); one that also has [runtime] and [joint] "
-                                       "trains Modules A, B and C together from a teacher run (configs/hyperbones*.toml, "
-                                       "one process). Writes OUT/checkpoint.pt (atomic, every train.checkpoint_every "
-                                       "steps, config inside) and TensorBoard logs in OUT/tensorboard.")
+                                       "trains Modules A, B and C together from a teacher run "
+                                       "(configs/hyperbones*.toml, one process). Writes OUT/checkpoint.pt (atomic, "
+                                       "every train.checkpoint_every steps, config inside) and TensorBoard logs in "
+                                       "OUT/tensorboard.")
     train.add_argument("--config", required=True, help="TOML training config")
     train.add_argument("--out", required=True, help="run folder")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")

@@ -169,7 +169,8 @@ class UvRaster:
         """Plain tensors (COO indices and values) for saving."""
         raster, sampler = self.raster.to_sparse_coo(), self.sampler.to_sparse_coo()
         return {"resolution": self.resolution, "coverage": self.coverage,
-                "raster_indices": raster.indices(), "raster_values": raster.values(), "raster_shape": list(raster.shape),
+                "raster_indices": raster.indices(), "raster_values": raster.values(),
+                "raster_shape": list(raster.shape),
                 "sampler_indices": sampler.indices(), "sampler_values": sampler.values(),
                 "sampler_shape": list(sampler.shape)}
 

@@ -124,7 +124,8 @@ class BoneNet(nn.Module):
         return delta, self.pose_embedding(h)
 
 
-def correct_bones(rotations: torch.Tensor, positions: torch.Tensor, delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+def correct_bones(rotations: torch.Tensor, positions: torch.Tensor,
+                  delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Bone frames (...,B,3,3), (...,B,3) and ΔT (...,B,9) -> corrected frames (6D rotations add)."""
     six_d = rotations[..., :, :2] + delta[..., :6].unflatten(-1, (3, 2))
     return roma.special_gramschmidt(six_d), positions + delta[..., 6:]
