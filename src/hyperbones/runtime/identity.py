@@ -24,8 +24,8 @@ from hyperbones.rig.virtual_bones import VirtualBones
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
-    from hyperbones.models.cloth_graph import ClothGraph
     from hyperbones.garment.garment import Garment
+    from hyperbones.models.cloth_graph import ClothGraph
     from hyperbones.models.hyperbones import HyperBonesModel
 
 IDENTITY_VERSION = 2
