@@ -45,3 +45,21 @@ def test_bench_reports_the_speedup(joint_checkpoint, tmp_path, capsys):
     assert [r["method"] for r in records] == ["teacher", "hyperbones"]
     out = capsys.readouterr().out
     assert "| hyperbones | tshirt |" in out and "hyperbones is " in out and "faster than the teacher on tshirt" in out
+
+
+def test_simulator_load_and_module_a_alone(joint_checkpoint, body):
+    """The Python API: Simulator.load on (garment, body) pairs; load_module_a for Module A alone."""
+    from hyperbones.garment.templates import make_template
+    from hyperbones.motion.builtin import builtin_motion
+    from hyperbones.runtime.simulator import Simulator, load_module_a
+
+    garment = make_template("tshirt", body, vertices=1000)
+    simulator = Simulator.load([(garment, body), (garment, body)], joint_checkpoint)
+    motion = builtin_motion("walk", body, duration=0.5)
+    for t in range(motion.num_frames):
+        first, second = simulator.step(motion.joint_rotations[t].expand(2, 31, 3, 3),
+                                       motion.root_translation[t].expand(2, 3))
+    assert first.shape == (garment.num_vertices, 3) and torch.allclose(first, second)
+    module_a = load_module_a(joint_checkpoint)
+    assert all(torch.equal(a, b) for a, b in zip(module_a.state_dict().values(),
+                                                 simulator.module_a.state_dict().values()))

@@ -49,7 +49,7 @@ def test_joint_steps_from_a_teacher_run(tmp_path, body):
     phase_one.train()
     phase_one.close()
 
-    from hyperbones.simulate.hyperbones import hyperbones_from_checkpoint
+    from hyperbones.runtime.simulator import hyperbones_from_checkpoint
 
     with pytest.raises(InputFileError, match="a teacher checkpoint, not a HyperBones one"):
         hyperbones_from_checkpoint(teacher_run / "checkpoint.pt")

@@ -250,7 +250,7 @@ def cmd_identity(args) -> int:
     from hyperbones.physics.material import Material
     from hyperbones.runtime.identity import encode_identity
     from hyperbones.simulate.garments import draped_garment
-    from hyperbones.simulate.hyperbones import hyperbones_from_checkpoint
+    from hyperbones.runtime.simulator import hyperbones_from_checkpoint
 
     if args.untrained and args.checkpoint:
         raise ParameterError("--untrained and --checkpoint exclude each other")

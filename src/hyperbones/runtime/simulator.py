@@ -7,12 +7,14 @@ characters), one (V,B)@(B,12) garment skinning, two sparse products to and from 
 image and the Conv-MLP (batched). No state but the last three frames of bone positions, so
 it does not grow with the motion.
 
-    sim = Simulator(model, [identity])          # or Simulator.from_checkpoint(path, ...)
+    sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root in motion_frames:       # (31,3,3), (3,) per character
         vertices = sim.step(rotations[None], root[None])[0]   # (V,3)
 """
 
 from __future__ import annotations
+
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -23,6 +25,10 @@ from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_window_featu
 from hyperbones.rig.virtual_bones import bone_transforms, pose_bones
 from hyperbones.runtime.identity import Identity
 
+if TYPE_CHECKING:
+    from hyperbones.body.anny_body import Body
+    from hyperbones.garment.garment import Garment
+
 WINDOW = 3  # frames t−2, t−1, t
 
 
@@ -31,14 +37,34 @@ def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Ten
     return points @ transform[..., :3, :3].transpose(-1, -2) + transform[..., None, :3, 3]
 
 
-def load_module_a(path, device: str | torch.device = "cpu") -> ModuleA:
-    """Module A alone from a HyperBones checkpoint (all the per-frame runtime needs with
-    identity caches; no teacher, Warp or Anny), in eval mode."""
-    from hyperbones.training.checkpoint import load_checkpoint
+def hyperbones_payload(path=None, device: str | torch.device = "cpu") -> dict:
+    """A HyperBones checkpoint's payload (default: the shipped model), refusing a teacher's."""
+    from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
 
+    if path is None:
+        if not SHIPPED_HYPERBONES.exists():
+            raise ParameterError("no trained HyperBones model ships with this version yet: train one with "
+                                 "`hyperbones train --config configs/hyperbones-small.toml` and pass --checkpoint FILE")
+        path = SHIPPED_HYPERBONES
     payload = load_checkpoint(path, map_location=device)
     if "runtime" not in payload["config"]:
         raise InputFileError(path, "a teacher checkpoint, not a HyperBones one (its config has no [runtime] table)")
+    return payload
+
+
+def hyperbones_from_checkpoint(path=None, device: str | torch.device = "cpu"):
+    """The ``HyperBonesModel`` (eval mode) of a joint training checkpoint or an exported one
+    (default: the shipped one). Building it imports the teacher (Warp); ``load_module_a``
+    is the light path for Module A alone."""
+    from hyperbones.models.hyperbones import HyperBonesModel
+
+    return HyperBonesModel.from_payload(hyperbones_payload(path, device)).to(device)
+
+
+def load_module_a(path=None, device: str | torch.device = "cpu") -> ModuleA:
+    """Module A alone from a HyperBones checkpoint (all the per-frame runtime needs with
+    identity caches; no teacher, Warp or Anny), in eval mode."""
+    payload = hyperbones_payload(path, device)
     runtime = dict(payload["config"]["runtime"])
     runtime["conv_channels"] = tuple(runtime["conv_channels"])
     module = ModuleA(ModuleAConfig(**runtime))
@@ -110,6 +136,20 @@ class Simulator:
         self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
         self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
         self.window: torch.Tensor | None = None  # (N,3,B,3) world bone positions
+
+    @classmethod
+    def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
+             uv_resolution: int | None = None) -> "Simulator":
+        """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
+        pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
+        shipped one)."""
+        from hyperbones.runtime.identity import encode_identity
+
+        model = hyperbones_from_checkpoint(checkpoint, device)
+        with torch.no_grad():
+            identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
+                          for garment, body in characters]
+        return cls(model.runtime, identities, device)
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""

@@ -10,27 +10,11 @@ import torch
 from tqdm import tqdm
 
 from hyperbones.body.anny_body import Body, PosedBody
-from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.garment.garment import Garment
-from hyperbones.models.hyperbones import HyperBonesModel
 from hyperbones.physics.material import Material
 from hyperbones.runtime.identity import encode_identity
-from hyperbones.runtime.simulator import Simulator
-from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
+from hyperbones.runtime.simulator import Simulator, hyperbones_from_checkpoint
 from hyperbones.training.trainer import pick_device
-
-
-def hyperbones_from_checkpoint(path: str | Path | None = None, device: str | torch.device = "cpu") -> HyperBonesModel:
-    """The HyperBones model of a joint training checkpoint or an exported one (default: the shipped one)."""
-    if path is None:
-        if not SHIPPED_HYPERBONES.exists():
-            raise ParameterError("no trained HyperBones model ships with this version yet: train one with "
-                                 "`hyperbones train --config configs/hyperbones-small.toml` and pass --checkpoint FILE")
-        path = SHIPPED_HYPERBONES
-    payload = load_checkpoint(path, map_location=device)
-    if "runtime" not in payload["config"]:
-        raise InputFileError(path, "a teacher checkpoint, not a HyperBones one (its config has no [runtime] table)")
-    return HyperBonesModel.from_payload(payload).to(device)
 
 
 class HyperBonesMethod:
