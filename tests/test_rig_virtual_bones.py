@@ -5,10 +5,11 @@ import math
 import pytest
 import torch
 
+from hyperbones.body.skeleton import skinning_transforms
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.rotations import rot_z
-from hyperbones.rig.virtual_bones import NUM_BONES, VirtualBones, bone_transforms
+from hyperbones.rig.virtual_bones import NUM_BONES, VirtualBones
 
 
 @pytest.fixture(scope="module")
@@ -56,7 +57,7 @@ def test_rest_pose_and_rigid_motion(rig, pants):
     assert torch.allclose(positions[0], rig.rest_positions, atol=1e-6)
     assert torch.allclose(rotations[1], rotation.expand(NUM_BONES, 3, 3), atol=1e-6)
     garment = linear_blend_skinning(pants.vertices, rig.log_weights.exp(),
-                                    bone_transforms(rig.rest_positions, rotations, positions))
+                                    skinning_transforms(rig.rest_positions, rotations, positions))
     assert torch.allclose(garment[0], pants.vertices, atol=1e-5)
     assert torch.allclose(garment[1], pants.vertices @ rotation.T + transform[:3, 3], atol=1e-5)
 

@@ -5,11 +5,11 @@ import copy
 import pytest
 import torch
 
+from hyperbones.body.skeleton import skinning_transforms
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.models.hyperbones import HyperBonesModel
-from hyperbones.rig.virtual_bones import bone_transforms
 from hyperbones.runtime.identity import encode_identity
 from hyperbones.runtime.simulator import Simulator
 
@@ -51,7 +51,7 @@ def test_untrained_runtime_is_virtual_bone_skinning(setup, body):
     posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
     rotations, positions = identity.bones.pose(posed.skinning_transforms)
     expected = linear_blend_skinning(identity.rest_vertices, identity.weights,
-                                     bone_transforms(identity.bones.rest_positions, rotations, positions))
+                                     skinning_transforms(identity.bones.rest_positions, rotations, positions))
     assert torch.allclose(out, expected, atol=1e-4)
 
 

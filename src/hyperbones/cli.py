@@ -210,23 +210,30 @@ def cmd_export_teacher(args) -> int:
     return 0
 
 
-def cmd_bench(args) -> int:
+def _report_records(records, json_path: str | None, notes: list[str]) -> None:
+    """Print bench records as a table, then ``notes``; write them to ``json_path`` when given."""
     import json
 
     from hyperbones.io_utils import atomic_path
+    from hyperbones.runtime.timing import bench_table, records_as_dicts
+
+    print(bench_table(records))
+    for line in notes:
+        print(line)
+    if json_path:
+        with atomic_path(json_path) as tmp:
+            tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
+        print(f"wrote {Path(json_path).resolve()}")
+
+
+def cmd_bench(args) -> int:
     from hyperbones.runtime.bench import bench
-    from hyperbones.runtime.timing import bench_table, records_as_dicts, speedups
+    from hyperbones.runtime.timing import speedups
 
     records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
                     device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint,
                     uv_resolution=args.uv_resolution, progress=not args.quiet)
-    print(bench_table(records))
-    for line in speedups(records):
-        print(line)
-    if args.json:
-        with atomic_path(args.json) as tmp:
-            tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
-        print(f"wrote {Path(args.json).resolve()}")
+    _report_records(records, args.json, speedups(records))
     return 0
 
 
@@ -249,8 +256,8 @@ def cmd_identity(args) -> int:
     from hyperbones.body.shape import BodyShape
     from hyperbones.physics.material import Material
     from hyperbones.runtime.identity import encode_identity
-    from hyperbones.simulate.garments import draped_garment
     from hyperbones.runtime.simulator import hyperbones_from_checkpoint
+    from hyperbones.simulate.garments import draped_garment
 
     if args.untrained and args.checkpoint:
         raise ParameterError("--untrained and --checkpoint exclude each other")
@@ -273,21 +280,11 @@ def cmd_identity(args) -> int:
 
 
 def cmd_bench_runtime(args) -> int:
-    import json
-
-    from hyperbones.io_utils import atomic_path
     from hyperbones.runtime.bench_runtime import bench_runtime
-    from hyperbones.runtime.timing import bench_table, records_as_dicts
 
     records = bench_runtime(args.identity, args.motion, checkpoint=args.checkpoint, uv_resolution=args.uv_resolution,
                             device=args.device, batch=args.batch, frames=args.frames, warmup=args.warmup)
-    print(bench_table(records))
-    if not args.checkpoint:
-        print("(Module A freshly initialised: timing only)")
-    if args.json:
-        with atomic_path(args.json) as tmp:
-            tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
-        print(f"wrote {Path(args.json).resolve()}")
+    _report_records(records, args.json, [] if args.checkpoint else ["(Module A freshly initialised: timing only)"])
     return 0
 
 

@@ -87,10 +87,10 @@ def skinning_transforms(
         joint_positions: (T,31,3) posed joint heads (from forward_kinematics).
 
     Returns:
-        (T,31,4,4) with x_posed = R_c (x_rest - rest_c) + head_c.
+        (T,31,4,4) with x_posed = R_c (x_rest - rest_c) + head_c. Any other frames (virtual
+        bones: rest (B,3), rotations (...,B,3,3), positions (...,B,3)) work the same way.
     """
-    num_frames = joint_rotations.shape[0]
-    out = torch.zeros(num_frames, NUM_JOINTS, 4, 4, dtype=joint_rotations.dtype, device=joint_rotations.device)
+    out = torch.zeros(*joint_rotations.shape[:-2], 4, 4, dtype=joint_rotations.dtype, device=joint_rotations.device)
     out[..., :3, :3] = joint_rotations
     out[..., :3, 3] = joint_positions - (joint_rotations @ rest_joint_positions.unsqueeze(-1)).squeeze(-1)
     out[..., 3, 3] = 1.0

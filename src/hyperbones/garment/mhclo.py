@@ -25,14 +25,13 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
 
 from hyperbones.body.anny_body import Body, _init_warp_quietly
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.obj_io import _read_text, clean_triangle_mesh, garment_from_arrays, read_obj
+from hyperbones.geometry.geodesic import mesh_components
 
 HM08_VERTEX_COUNT = 19158
 
@@ -241,9 +240,8 @@ def _fit_and_split(mhclo_path: str | Path, body: Body):
     arrays = clean_triangle_mesh(binding.obj_path, mesh, positions)
     vertices, faces = arrays[0], arrays[1]
     n = len(vertices)
-    graph = coo_matrix((np.ones(faces.size), (faces.ravel(), np.roll(faces, 1, axis=1).ravel())), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
-    components = [np.flatnonzero(labels == c) for c in range(count)]
+    labels = mesh_components(n, torch.from_numpy(faces))
+    components = [np.flatnonzero(labels == c) for c in range(labels.max() + 1)]
     components.sort(key=lambda ids: (-len(ids), ids[0]))  # largest first; ties by file order
     pieces = [(ids, np.isin(faces[:, 0], ids)) for ids in components]
     return binding, arrays, pieces

@@ -19,8 +19,8 @@ def diffuse(values: torch.Tensor, edges: torch.Tensor, rate: torch.Tensor, steps
     """
     num = values.shape[0]
     index = torch.cat([edges, edges.flip(1)]).T
-    adjacency = torch.sparse_coo_tensor(index, torch.ones(index.shape[1], dtype=values.dtype), (num, num),
-                                        check_invariants=False).coalesce()
+    adjacency = torch.sparse_coo_tensor(index, torch.ones(index.shape[1], dtype=values.dtype, device=values.device),
+                                        (num, num), check_invariants=False).coalesce()
     degree = torch.sparse.sum(adjacency, 1).to_dense().clamp(min=1)[:, None]
     for _ in range(steps):
         values = (1 - rate) * values + rate * torch.sparse.mm(adjacency, values) / degree

@@ -28,10 +28,7 @@ class HyperBonesConfig:
 
     @classmethod
     def from_dict(cls, values: dict) -> "HyperBonesConfig":
-        runtime = dict(values.get("runtime", {}))
-        if "conv_channels" in runtime:
-            runtime["conv_channels"] = tuple(runtime["conv_channels"])
-        return cls(TrunkConfig(**values.get("trunk", {})), ModuleAConfig(**runtime))
+        return cls(TrunkConfig(**values.get("trunk", {})), ModuleAConfig.from_dict(values.get("runtime", {})))
 
 
 class HyperBonesModel(nn.Module):

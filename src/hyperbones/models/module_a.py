@@ -28,6 +28,9 @@ import roma
 import torch
 from torch import nn
 
+from hyperbones.geometry.rotations import rot_z
+from hyperbones.motion.motion import heading_angle
+
 CENTIMETRE = 0.01
 
 
@@ -52,6 +55,14 @@ class ModuleAConfig:
     conv_channels: tuple[int, int, int] = (64, 128, 64)
     use_conv: bool = True
 
+    @classmethod
+    def from_dict(cls, values: dict) -> "ModuleAConfig":
+        """From ``asdict``'s output as a checkpoint stores it (lists back to tuples)."""
+        values = dict(values)
+        if "conv_channels" in values:
+            values["conv_channels"] = tuple(values["conv_channels"])
+        return cls(**values)
+
 
 def heading_frame(root_rotation: torch.Tensor, root_position: torch.Tensor) -> torch.Tensor:
     """(...,3,3) Hips rotation (relative to the A-pose), (...,3) Hips position -> (...,4,4) world -> local.
@@ -59,15 +70,10 @@ def heading_frame(root_rotation: torch.Tensor, root_position: torch.Tensor) -> t
     The local frame has its origin at the Hips and is turned about Z by the character's
     heading (the A-pose faces −Y), so local −Y is where the character faces.
     """
-    facing = root_rotation[..., :, 1] * -1.0  # the rotated −Y axis
-    yaw = torch.atan2(facing[..., 0], -facing[..., 1])
-    cos, sin = torch.cos(yaw), torch.sin(yaw)
-    out = torch.zeros(*yaw.shape, 4, 4, dtype=root_rotation.dtype, device=root_rotation.device)
-    # Rz(yaw)^T
-    out[..., 0, 0], out[..., 0, 1] = cos, sin
-    out[..., 1, 0], out[..., 1, 1] = -sin, cos
-    out[..., 2, 2] = 1.0
-    out[..., :3, 3] = -(out[..., :3, :3] @ root_position[..., None]).squeeze(-1)
+    turn_back = rot_z(heading_angle(root_rotation)).transpose(-1, -2)
+    out = torch.zeros(*turn_back.shape[:-2], 4, 4, dtype=root_rotation.dtype, device=root_rotation.device)
+    out[..., :3, :3] = turn_back
+    out[..., :3, 3] = -(turn_back @ root_position[..., None]).squeeze(-1)
     out[..., 3, 3] = 1.0
     return out
 

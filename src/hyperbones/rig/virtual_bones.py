@@ -114,16 +114,3 @@ def pose_bones(joint_weights: torch.Tensor, rest_positions: torch.Tensor,
     positions = (blended[..., :3] @ rest_positions[..., None]).squeeze(-1) + blended[..., 3]
     rotations = roma.special_gramschmidt(blended[..., :3, :2])
     return rotations, positions
-
-
-def bone_transforms(rest_positions: torch.Tensor, rotations: torch.Tensor, positions: torch.Tensor) -> torch.Tensor:
-    """(B,3) rest positions, (...,B,3,3) rotations, (...,B,3) positions -> (...,B,4,4) rest -> posed maps.
-
-    Bone b maps x to R_b (x − c_b) + p_b, i.e. the affine map [R_b | p_b − R_b c_b]; these are
-    the transforms ``linear_blend_skinning`` blends.
-    """
-    out = torch.zeros(*rotations.shape[:-2], 4, 4, dtype=rotations.dtype, device=rotations.device)
-    out[..., :3, :3] = rotations
-    out[..., :3, 3] = positions - (rotations @ rest_positions[..., None]).squeeze(-1)
-    out[..., 3, 3] = 1.0
-    return out

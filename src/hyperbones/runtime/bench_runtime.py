@@ -50,13 +50,14 @@ def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | N
     rotations, roots = load_motion_npz(motion)
     if rotations.shape[0] < warmup + frames:
         raise ParameterError(f"{motion}: {rotations.shape[0]} frames, fewer than --warmup + --frames")
+    trained = load_module_a(checkpoint) if checkpoint else None
     records = []
     for path in identity_paths:
         identity = Identity.load(path)
         resolution = uv_resolution or identity.raster.resolution
         identity = identity.at_resolution(resolution)
-        if checkpoint:
-            module_a = load_module_a(checkpoint)
+        if trained is not None:
+            module_a = trained
         else:
             torch.manual_seed(0)
             layers, _, hidden = identity.film.shape  # the Bone-Net the cache was made for

@@ -14,6 +14,7 @@ it does not grow with the motion.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import torch
@@ -22,7 +23,7 @@ from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_window_features, correct_bones, heading_frame
-from hyperbones.rig.virtual_bones import bone_transforms, pose_bones
+from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.identity import Identity
 
 if TYPE_CHECKING:
@@ -65,21 +66,39 @@ def load_module_a(path=None, device: str | torch.device = "cpu") -> ModuleA:
     """Module A alone from a HyperBones checkpoint (all the per-frame runtime needs with
     identity caches; no teacher, Warp or Anny), in eval mode."""
     payload = hyperbones_payload(path, device)
-    runtime = dict(payload["config"]["runtime"])
-    runtime["conv_channels"] = tuple(runtime["conv_channels"])
-    module = ModuleA(ModuleAConfig(**runtime))
+    module = ModuleA(ModuleAConfig.from_dict(payload["config"]["runtime"]))
     state = payload.get("ema") or payload["model"]
     module.load_state_dict({name[len("runtime."):]: value for name, value in state.items()
                             if name.startswith("runtime.")})
     return module.to(device).eval()
 
 
-def module_a_frame(module_a: ModuleA, identities: list[Identity], window: torch.Tensor, rotations: torch.Tensor,
+@dataclass
+class IdentityBatch:
+    """N identity caches (one per character; the same one may repeat) with the inputs the
+    Bone-Net and the Conv-MLP take from them stacked once, not every frame.
+
+    film: (N,layers,2,hidden); features_uv: (N,d_f,R,R); coverage: (N,1,R,R).
+    """
+
+    identities: list[Identity]
+    film: torch.Tensor
+    features_uv: torch.Tensor
+    coverage: torch.Tensor
+
+    @classmethod
+    def of(cls, identities: list[Identity]) -> "IdentityBatch":
+        return cls(identities, torch.stack([identity.film for identity in identities]),
+                   torch.stack([identity.features_uv for identity in identities]),
+                   torch.stack([identity.raster.coverage for identity in identities])[:, None])
+
+
+def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
                    positions: torch.Tensor, to_local: torch.Tensor) -> list[torch.Tensor]:
     """One frame of Module A for N characters (differentiable; the trainer calls it too).
 
     Args:
-        identities: N identity caches (one per character; the same one may repeat).
+        batch: the N characters' identities.
         window: (N,3,B,3) world bone positions at t−2, t−1, t.
         rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
         to_local: (N,4,4) world -> local frame of each character at t.
@@ -87,22 +106,20 @@ def module_a_frame(module_a: ModuleA, identities: list[Identity], window: torch.
     Returns:
         N tensors (V_i,3): world garment positions at t.
     """
+    identities = batch.identities
     local_window = transform_points(to_local[:, None], window)
-    film = torch.stack([identity.film for identity in identities])
-    delta, pose_embedding = module_a.bone_net(bone_window_features(local_window), film)
+    delta, pose_embedding = module_a.bone_net(bone_window_features(local_window), batch.film)
     local_rotations = to_local[:, None, :3, :3] @ rotations
     local_positions = transform_points(to_local, positions)
     local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
     stage_one = [
         linear_blend_skinning(identity.rest_vertices, identity.weights,
-                              bone_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
-                                              local_positions[i:i + 1]))[0]
+                              skinning_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
+                                                  local_positions[i:i + 1]))[0]
         for i, identity in enumerate(identities)]
     if module_a.refiner is not None:
         images = torch.cat([identity.raster.rasterize(points[None]) for identity, points in zip(identities, stage_one)])
-        features = torch.stack([identity.features_uv for identity in identities])
-        coverage = torch.stack([identity.raster.coverage for identity in identities])[:, None]
-        displacement = module_a.refine(images, coverage, features, pose_embedding)
+        displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding)
         stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
                      for i, (identity, points) in enumerate(zip(identities, stage_one))]
     to_world = torch.linalg.inv(to_local)
@@ -131,6 +148,7 @@ class Simulator:
         self.device = torch.device(device)
         self.module_a = module_a.to(self.device).eval()
         self.identities = [identity.to(self.device) for identity in identities]
+        self.batch = IdentityBatch.of(self.identities)
         # The skeleton -> bones stage of every character, stacked, on the CPU.
         self.rest_joints = torch.stack([identity.rest_joint_positions.cpu() for identity in identities])  # (N,31,3)
         self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
@@ -174,4 +192,4 @@ class Simulator:
             self.window = positions[:, None].expand(count, WINDOW, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        return module_a_frame(self.module_a, self.identities, self.window, rotations, positions, to_local)
+        return module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)

@@ -12,8 +12,7 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
-from hyperbones.runtime.identity import encode_identity
-from hyperbones.runtime.simulator import Simulator, hyperbones_from_checkpoint
+from hyperbones.runtime.simulator import Simulator
 from hyperbones.training.trainer import pick_device
 
 
@@ -26,11 +25,8 @@ class HyperBonesMethod:
                  material: Material | None = None, checkpoint: str | Path | None = None, device: str = "auto",
                  progress: bool = False, uv_resolution: int | None = None):
         self.device = pick_device(device)
-        model = hyperbones_from_checkpoint(checkpoint, self.device)
         garment = replace(garment, material=material or garment.material)
-        with torch.no_grad():
-            identity = encode_identity(model, garment, body, uv_resolution=uv_resolution)
-        self.simulator = Simulator(model.runtime, [identity], self.device)
+        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution)
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:

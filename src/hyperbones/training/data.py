@@ -122,10 +122,11 @@ class Identity:
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
-              skin_weights: torch.Tensor, material: Material) -> "Identity":
+              skin_weights: torch.Tensor, material: Material, garment: Garment | None = None) -> "Identity":
         rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
         topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
-        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask))
+        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask),
+                   garment)
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
         """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
@@ -219,10 +220,9 @@ class TeacherData:
         body = Body(self.sample_shape())
         rest_vertices = source.follower.place(body)
         material = self.sample_material()
-        identity = Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                                  source.skin_weights, material)
-        identity.garment = replace(source.garment.with_vertices(rest_vertices), material=material)
-        return identity
+        return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
+                              source.skin_weights, material,
+                              replace(source.garment.with_vertices(rest_vertices), material=material))
 
     def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
         """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),

@@ -23,7 +23,7 @@ from hyperbones.models.hyperbones import HyperBonesConfig, HyperBonesModel
 from hyperbones.models.module_a import heading_frame
 from hyperbones.models.teacher import Teacher
 from hyperbones.runtime.identity import apply_encoder
-from hyperbones.runtime.simulator import module_a_frame
+from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.loss import collision_weight_at, runtime_terms
 from hyperbones.training.rollouts import RolloutCache
@@ -77,8 +77,8 @@ class JointTrainer(TeacherTrainer):
         identity = apply_encoder(self.model, rollout.geometry)
         rotations, positions = identity.bones.pose(rollout.skinning[t - 2: t + 1].to(device))  # (3,B,3,3), (3,B,3)
         to_local = heading_frame(rollout.joint_rotations[t, 0].to(device), rollout.root_translation[t].to(device))
-        garment = module_a_frame(self.model.runtime, [identity], positions[None], rotations[-1:], positions[-1:],
-                                 to_local[None])[0]
+        garment = module_a_frame(self.model.runtime, IdentityBatch.of([identity]), positions[None], rotations[-1:],
+                                 positions[-1:], to_local[None])[0]
         body = rollout.body_vertices[t].to(device)
         self.runtime_proximity.update(body)
         nearest = self.runtime_proximity.query(garment.detach(), max_distance=QUERY_DISTANCE)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import torch
 
+from hyperbones.geometry.diffusion import diffuse
 from hyperbones.geometry.proximity import Nearest, face_planes, surface_points
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import (
@@ -48,13 +49,9 @@ def physics_terms(positions_next: torch.Tensor, positions: torch.Tensor, velocit
 
 
 def laplacian(values: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
-    """(V,C) per-vertex values, (E,2) undirected edges -> (V,C) value minus the mean of its neighbours."""
-    both_s = torch.cat([edges[:, 0], edges[:, 1]])
-    both_r = torch.cat([edges[:, 1], edges[:, 0]])
-    total = torch.zeros_like(values).index_add_(0, both_r, values[both_s])
-    count = torch.zeros(values.shape[0], device=values.device, dtype=values.dtype).index_add_(
-        0, both_r, torch.ones_like(both_r, dtype=values.dtype))
-    return values - total / count.clamp_min(1)[:, None]
+    """(V,C) per-vertex values, (E,2) undirected edges -> (V,C) value minus the mean of its
+    neighbours (one full ``diffuse`` step takes each vertex to that mean)."""
+    return values - diffuse(values, edges, torch.ones_like(values[:, :1]), steps=1)
 
 
 def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Tensor, rest: ClothRest,
