@@ -4,7 +4,7 @@ skin it came from, inside the strain limiter's sweeps; pinned cloth stays; moves
 import torch
 
 from hyperbones.geometry.proximity import BodyProximity
-from hyperbones.physics.contact import ContactPlanes, constrain_step
+from hyperbones.physics.contact import CONTACT_ROUNDS, ContactPlanes, constrain_step
 from hyperbones.physics.strain_limit import StrainLimiter
 
 MARGIN = 2e-3
@@ -76,3 +76,47 @@ def test_planes_only_push_outwards():
     projected = planes.project(points)
     torch.testing.assert_close(projected, torch.tensor([[0.3, 0.1, 0.0], [5.0, 5.0, -5.0], [0.0, 0.4, 0.2]]))
     torch.testing.assert_close(planes.project(projected), projected)  # on or in front of a plane: kept
+
+
+def _belt(body, proximity, outward: torch.Tensor, height: float = 1.0, count: int = 32):
+    """(count,3) a horizontal loop around the waist at ``outward`` (count,) metres outside the
+    skin, found by walking in from 40 cm along each direction until the first point inside."""
+    v = body.rest_vertices
+    waist = v[((v[:, 2] - height).abs() < 0.01) & (v[:, 0].abs() < 0.2)]
+    centre = waist[:, :2].mean(0)
+    angle = torch.arange(count) * 2 * torch.pi / count
+    directions = torch.stack([angle.cos(), angle.sin()], 1)
+    radii = torch.linspace(0.4, 0.0, 401)
+    probes = centre + radii[:, None, None] * directions[None]  # (401,count,2)
+    probes = torch.cat([probes.reshape(-1, 2), torch.full((probes.shape[0] * count, 1), height)], 1)
+    inside = proximity.query(probes, max_distance=0.5).signed_distance.reshape(len(radii), count) < 0
+    skin_radius = radii[inside.float().argmax(0)]
+    return torch.cat([centre + (skin_radius + outward)[:, None] * directions, torch.full((count, 1), height)], 1)
+
+
+def test_cloth_the_limiter_pulls_into_the_body_gets_planes_and_the_slack_comes_from_free_cloth(body):
+    """A stretched belt around the waist, snug on one side, 8 cm out on the other: the limiter
+    shrinks it into the snug side; with a plane there the slack comes from the loose side and
+    the belt ends much less stretched than a nearest-point push after one pass leaves it."""
+    proximity = BodyProximity(body.faces)
+    proximity.update(body.rest_vertices)
+    count = 32
+    angle = torch.arange(count) * 2 * torch.pi / count
+    belt = _belt(body, proximity, torch.where(angle.cos() > 0, 0.004, 0.08))
+    assert (proximity.query(belt, max_distance=0.3).signed_distance > 0).all()
+    edges = torch.stack([torch.arange(count), (torch.arange(count) + 1) % count], 1)
+    rest_lengths = 0.8 * (belt[edges[:, 1]] - belt[edges[:, 0]]).norm(dim=-1)  # 25 % stretched
+    limiter = StrainLimiter.build(edges, rest_lengths, torch.full((count,), 1e-3), torch.zeros(count, dtype=torch.bool))
+    untracked = proximity.query(belt + 1.0, max_distance=0.1)  # nothing near the skin before the step
+    movable = torch.ones(count, dtype=torch.bool)
+
+    def stretch(rounds):
+        moved, _ = constrain_step(belt, torch.zeros_like(belt), limiter, proximity, untracked, body.rest_vertices,
+                                  movable, MARGIN, 0.3, rounds=rounds)
+        assert (proximity.query(moved, max_distance=0.3).signed_distance > 0).all()
+        ratio = (moved[edges[:, 1]] - moved[edges[:, 0]]).norm(dim=-1) / rest_lengths
+        return float(ratio.max()), float(ratio.mean())
+
+    one_pass, with_rounds = stretch(0), stretch(CONTACT_ROUNDS)
+    assert one_pass[0] > 1.3  # the push after one pass stretches the snug side again
+    assert with_rounds[0] < one_pass[0] - 0.1 and with_rounds[1] < one_pass[1]

@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
+
+from hyperbones.geometry.sparse import to_csr
 from scipy import ndimage
 
 from hyperbones.errors import ParameterError
@@ -38,13 +40,6 @@ def _barycentric(points: torch.Tensor, triangles: torch.Tensor) -> torch.Tensor:
     beta = (v2[:, 0] * v1[:, 1] - v2[:, 1] * v1[:, 0]) / det
     gamma = (v0[:, 0] * v2[:, 1] - v0[:, 1] * v2[:, 0]) / det
     return torch.stack([1 - beta - gamma, beta, gamma], dim=1)
-
-
-def _csr(matrix: torch.Tensor) -> torch.Tensor:
-    """A COO matrix in CSR layout (the fast one for sparse @ dense; torch calls it beta)."""
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message="Sparse CSR tensor support is in beta")
-        return matrix.coalesce().to_sparse_csr()
 
 
 def _fill_from_neighbours(sampler: torch.Tensor, resolved: torch.Tensor, faces: torch.Tensor,
@@ -131,7 +126,7 @@ class UvRaster:
         raster = torch.sparse_coo_tensor(
             torch.stack([texels.repeat_interleave(3), faces[texel_face].reshape(-1)]),
             weights.reshape(-1).to(torch.float32), (size * size, num_vertices), check_invariants=False)
-        raster = _csr(raster)
+        raster = to_csr(raster)
 
         # Each (vertex, UV) corner pair once; a seam vertex has several.
         pairs = torch.unique(torch.stack([faces.reshape(-1), face_uvs.reshape(-1)], 1), dim=0)
@@ -163,7 +158,7 @@ class UvRaster:
             (tap_weights[good] / copies[pairs[good, 0], None]).reshape(-1),
             (num_vertices, size * size), check_invariants=False).coalesce()
         sampler = _fill_from_neighbours(sampler, copies > 0, faces)
-        return cls(size, raster, _csr(sampler.to(torch.float32)), coverage)
+        return cls(size, raster, to_csr(sampler.to(torch.float32)), coverage)
 
     def state_dict(self) -> dict:
         """Plain tensors (COO indices and values) for saving."""
@@ -177,7 +172,7 @@ class UvRaster:
     @classmethod
     def from_state_dict(cls, state: dict) -> "UvRaster":
         def matrix(name: str) -> torch.Tensor:
-            return _csr(torch.sparse_coo_tensor(state[f"{name}_indices"], state[f"{name}_values"],
+            return to_csr(torch.sparse_coo_tensor(state[f"{name}_indices"], state[f"{name}_values"],
                                                 tuple(state[f"{name}_shape"]), check_invariants=True))
 
         return cls(int(state["resolution"]), matrix("raster"), matrix("sampler"), state["coverage"])

@@ -9,7 +9,17 @@ Instead each vertex that was near the skin before the step keeps the skin patch 
 near: the face it was nearest to, at the face's new place, bounds it as a half-space, and
 the strain limiter enforces those half-spaces inside its sweeps, so the limit's pull and
 the contact push settle together rather than undoing each other
-(``StrainLimiter.project``). A last nearest-point push catches what no plane covered.
+(``StrainLimiter.project``).
+
+The limiter's pull itself draws cloth into the body where it wraps a limb: a stretched
+loop around a thigh shrinks into it. Such cloth was not near the skin before the step, so
+no tracked plane holds it, and a nearest-point push afterwards stretches the loop again.
+So after the limiter, cloth it left inside gets a plane of its own (its nearest face, at
+the margin) and the limiter runs again from there, for up to ``CONTACT_ROUNDS`` rounds;
+the slack then comes from the free cloth, as it would in a real garment. Teacher at step
+21750, dress on held-out clip 16_35: strain 8.10 J with one round, 1.29 J with 3, 0.35 J
+with 8 (LBS: 3.13 J); collision 0.20-0.23 % either way. A last nearest-point push catches
+what no plane covered.
 """
 
 from __future__ import annotations
@@ -23,6 +33,8 @@ from hyperbones.physics.strain_limit import StrainLimiter
 
 # Vertices within this distance of the skin before a step keep their face as a contact plane.
 TRACK_REACH = 0.02  # m
+# Limiter passes at most after the first, each with planes for the cloth the last one left inside.
+CONTACT_ROUNDS = 8
 
 
 @dataclass
@@ -50,6 +62,18 @@ class ContactPlanes:
         skin = surface_points(body_after, body_faces, face, nearest_before.barycentric[vertex])
         return cls(vertex, skin + margin * normal.to(skin), normal.to(skin))
 
+    @classmethod
+    def nearest(cls, nearest: Nearest, selected: torch.Tensor, margin: float) -> "ContactPlanes":
+        """Planes for the ``selected`` (V,) vertices at their nearest skin point now (``nearest``,
+        queried on the body where it is), shifted out by ``margin``."""
+        vertex = (selected & nearest.found).nonzero().squeeze(1)
+        normal = nearest.normal[vertex]
+        return cls(vertex, nearest.point[vertex] + margin * normal, normal)
+
+    def __add__(self, other: "ContactPlanes") -> "ContactPlanes":
+        return ContactPlanes(torch.cat([self.vertex, other.vertex]), torch.cat([self.point, other.point.to(self.point)]),
+                             torch.cat([self.normal, other.normal.to(self.normal)]))
+
     def project(self, positions: torch.Tensor) -> torch.Tensor:
         """(V,3) -> (V,3): each constrained vertex behind its plane moved onto it along the normal."""
         if not len(self.vertex):
@@ -60,13 +84,14 @@ class ContactPlanes:
 
 def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: StrainLimiter, proximity: BodyProximity,
                    nearest_before: Nearest, body_after: torch.Tensor, movable: torch.Tensor, margin: float,
-                   query_distance: float) -> tuple[torch.Tensor, torch.Tensor]:
+                   query_distance: float, rounds: int = CONTACT_ROUNDS) -> tuple[torch.Tensor, torch.Tensor]:
     """Strain limiting and hard contact after a step; every move is kept as velocity.
 
     positions, velocities: (V,3) the step's raw result (per-step displacement);
     limiter: the garment's strain limiting; proximity: the body's BVH (moved to ``body_after`` (Vb,3)
     here, where it stays for the next step); nearest_before: ``proximity.query`` of the
-    positions before the step on the body before it; movable: (V,) bool (not pinned).
+    positions before the step on the body before it; movable: (V,) bool (not pinned);
+    rounds: limiter passes after the first, each adding planes for cloth left inside.
     Returns positions, velocities, both (V,3).
     """
     proximity.update(body_after)
@@ -75,8 +100,17 @@ def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: S
     planes = ContactPlanes.tracked(nearest_before, body_after, proximity.faces, inside, margin)
     limited = limiter.project(positions, planes)
     after = proximity.query(limited, max_distance=query_distance)
+    for _ in range(rounds):
+        held = torch.zeros_like(movable)
+        held[planes.vertex] = True
+        left_inside = movable & ~held & (after.signed_distance < 0)
+        if not bool(left_inside.any()):
+            break
+        planes = planes + ContactPlanes.nearest(after, left_inside, margin)
+        limited = limiter.project(limited, planes)
+        after = proximity.query(limited, max_distance=query_distance)
     final = push_outside(limited, after, margin, movable=movable & (after.signed_distance < 0))
     return final, velocities + (final - positions)
 
 
-__all__ = ["ContactPlanes", "constrain_step", "TRACK_REACH"]
+__all__ = ["ContactPlanes", "constrain_step", "CONTACT_ROUNDS", "TRACK_REACH"]

@@ -11,7 +11,10 @@ metric, so shear is limited as well as stretch.
 Each sweep measures all edges at once, moves both ends of every edge outside the band
 towards the band's edge in proportion to their inverse masses (pinned vertices do not
 move), and averages the corrections a vertex receives over its edges (Jacobi), so the
-result does not depend on edge order and the loop runs over sweeps only. The averaging
+result does not depend on edge order and the loop runs over sweeps only. Both halves of a
+sweep are one sparse product each (edge vectors from positions, vertex moves from edge
+corrections), 1.6x faster on the CPU than gathers and scatters (2555-vertex dress: 40
+sweeps in 19 against 30 ms, one thread). The averaging
 under-relaxes: 40 sweeps pull the bulk of the error in without converging, and converging
 further does not pay (dress, 16_21: strain 0.40 J with 40 sweeps, 0.55 J with 100, 4.2 J
 with 100 sweeps over-relaxed by 1.5). Contact half-spaces
@@ -23,10 +26,12 @@ where a pull towards the body met the contact push (dress, 16_21: 2.4-5.1 J agai
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import torch
+
+from hyperbones.geometry.sparse import to_csr
 
 if TYPE_CHECKING:  # contact imports this module
     from hyperbones.physics.contact import ContactPlanes
@@ -53,6 +58,25 @@ class StrainLimiter:
     stretch: float = STRETCH_LIMIT
     compression: float = COMPRESSION_LIMIT
     iterations: int = LIMIT_ITERATIONS
+    # (E,V) sparse: edge vectors x[second] - x[first] = difference @ x.
+    difference: torch.Tensor = field(init=False, repr=False)
+    # (V,E) sparse: each vertex's averaged, mass-weighted share of its edges' corrections.
+    spread: torch.Tensor = field(init=False, repr=False)
+
+    def __post_init__(self):
+        first, second = self.edges[:, 0], self.edges[:, 1]
+        count, num_vertices = len(first), len(self.inverse_masses)
+        w_first, w_second = self.inverse_masses[first], self.inverse_masses[second]
+        w_sum = (w_first + w_second).clamp_min(1e-30)  # both pinned: both weights 0, nothing moves
+        edge_index = torch.arange(count, device=first.device)
+        ones = torch.ones(count, device=first.device)
+        self.difference = to_csr(torch.sparse_coo_tensor(
+            torch.stack([edge_index.repeat(2), torch.cat([second, first])]), torch.cat([ones, -ones]),
+            (count, num_vertices), check_invariants=False))
+        shares = torch.cat([w_first / w_sum / self.edge_counts[first], -w_second / w_sum / self.edge_counts[second]])
+        self.spread = to_csr(torch.sparse_coo_tensor(
+            torch.stack([torch.cat([first, second]), edge_index.repeat(2)]), shares,
+            (num_vertices, count), check_invariants=False))
 
     @classmethod
     def build(cls, edges: torch.Tensor, rest_lengths: torch.Tensor, masses: torch.Tensor, pinned_mask: torch.Tensor,
@@ -81,21 +105,14 @@ class StrainLimiter:
     def project(self, positions: torch.Tensor, contact: "ContactPlanes | None" = None) -> torch.Tensor:
         """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps; ``contact`` (a
         ``physics.contact.ContactPlanes``), when given, is enforced after every sweep."""
-        first, second = self.edges[:, 0], self.edges[:, 1]
-        w_first, w_second = self.inverse_masses[first], self.inverse_masses[second]
-        w_sum = (w_first + w_second).clamp_min(1e-30)  # both pinned: both weights 0, nothing moves
-        share_first, share_second = (w_first / w_sum)[:, None], (w_second / w_sum)[:, None]
         low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
         x = positions
         for _ in range(self.iterations):
-            along = x[second] - x[first]
+            along = self.difference @ x
             length = along.norm(dim=-1).clamp_min(1e-12)
             excess = length - length.clamp(low, high)  # > 0 too long, < 0 too short, 0 inside the band
             correction = (excess / length)[:, None] * along  # the move that would close the whole excess
-            step = torch.zeros_like(x)
-            step.index_add_(0, first, share_first * correction)
-            step.index_add_(0, second, -share_second * correction)
-            x = x + step / self.edge_counts[:, None]
+            x = x + self.spread @ correction
             if contact is not None:
                 x = contact.project(x)
         return x
