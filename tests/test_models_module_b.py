@@ -47,3 +47,20 @@ def test_heads_share_the_teacher_trunk(body):
     # A loss on the shape code trains the shared trunk (what the teacher runs on).
     code.shape_code.square().sum().backward()
     assert model.teacher.trunk.node_encoder[0].weight.grad.abs().sum() > 0
+
+
+def test_canonical_graphs_leave_the_trunk_statistics_and_can_leave_its_weights_alone(body):
+    torch.manual_seed(0)
+    model = HyperBonesModel(HyperBonesConfig(TrunkConfig(latent=16, blocks=2),
+                                             ModuleAConfig(num_bones=32, shape_code=24, uv_features=6))).train()
+    _, graph = _graph(body)
+    statistics = {name: value.clone() for name, value in model.teacher.state_dict().items() if "normal" in name}
+    assert statistics  # the trunk's input normalisers
+    code = model.encode(graph, train_trunk=False)
+    for name, value in model.teacher.state_dict().items():
+        if name in statistics:
+            assert torch.equal(value, statistics[name]), name
+    assert all(child.training for child in model.modules())  # the mode is given back
+    code.shape_code.square().sum().backward()
+    assert model.teacher.trunk.node_encoder[0].weight.grad is None  # the trunk learns nothing from B's loss
+    assert model.encoder.shape_head[0].weight.grad.abs().sum() > 0  # B's heads do

@@ -8,11 +8,13 @@ from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
 
+import torch
 from torch import nn
 
 from hyperbones.models.cloth_graph import ClothGraph
 from hyperbones.models.module_a import ModuleA, ModuleAConfig
 from hyperbones.models.module_b import IdentityCode, ModuleB
+from hyperbones.models.normalizer import frozen_statistics
 from hyperbones.models.teacher import Teacher, TrunkConfig
 
 
@@ -51,6 +53,13 @@ class HyperBonesModel(nn.Module):
         model.load_state_dict(payload.get("ema") or payload["model"])
         return model.eval()
 
-    def encode(self, graph: ClothGraph) -> IdentityCode:
-        """Module B: the trunk over the canonical graph, then the heads on the garment nodes."""
-        return self.encoder(self.teacher.encode(graph)[: graph.num_garment])
+    def encode(self, graph: ClothGraph, train_trunk: bool = True) -> IdentityCode:
+        """Module B: the trunk over the canonical graph, then the heads on the garment nodes.
+
+        The canonical graph (still body, zero velocities) is not a state C steps from, so it
+        never adds to the trunk's input statistics. ``train_trunk`` False runs the trunk
+        without gradient: a loss on B's output then trains B's heads only.
+        """
+        with frozen_statistics(self.teacher), torch.set_grad_enabled(train_trunk and torch.is_grad_enabled()):
+            latents = self.teacher.encode(graph)[: graph.num_garment]
+        return self.encoder(latents)

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import torch
 from torch import nn
 
@@ -46,3 +49,18 @@ class Normalizer(nn.Module):
     def std(self) -> torch.Tensor:
         variance = self.sum_squares / self.count.clamp_min(1) - self.mean.square()
         return variance.clamp_min(0).sqrt().clamp_min(self.std_epsilon)
+
+
+@contextmanager
+def frozen_statistics(module: nn.Module) -> Iterator[None]:
+    """Within the block, the ``Normalizer``s inside ``module`` use their statistics without
+    adding to them (inputs that are not the states they describe, e.g. Module B's canonical
+    graphs through the teacher's trunk); the rest of the module keeps its mode."""
+    gathering = [child for child in module.modules() if isinstance(child, Normalizer) and child.training]
+    for child in gathering:
+        child.eval()
+    try:
+        yield
+    finally:
+        for child in gathering:
+            child.train()

@@ -148,9 +148,10 @@ class IdentityGeometry:
                    garment.uvs.to(device), garment.face_uvs.to(device))
 
 
-def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry) -> Identity:
-    """Module B on an identity's geometry -> the identity cache (differentiable when grad is on)."""
-    code = model.encode(geometry.graph)
+def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry, train_trunk: bool = True) -> Identity:
+    """Module B on an identity's geometry -> the identity cache (differentiable when grad is
+    on; through the shared trunk too unless ``train_trunk`` is False)."""
+    code = model.encode(geometry.graph, train_trunk)
     weights = torch.softmax(geometry.bones.log_weights + code.weight_corrections, dim=1)
     film = model.runtime.modulator(code.shape_code[None])[0]
     features_uv = geometry.raster.rasterize(code.vertex_features[None])[0]

@@ -136,6 +136,11 @@ class JointConfig:
     laplacian_weight / interpenetration_weight: λ_lap, λ_interp (paper 0.1; 0 = the ablation);
         interpenetration_epsilon: ε (m).  physics_on_runtime: stretching, bending and
         collision (L_phys's weights) on A's output too.
+    trunk_from_runtime: A's loss also trains the shared trunk through Module B (the paper's
+        joint training). Off by default, to keep the teacher's physics training as #4
+        measured it: one gradient-norm clip covers the whole step, and A's L_3D (~25 cm²
+        at the ~5 cm by which C's rollouts leave LBS) is an order of magnitude above C's
+        physics terms (~1 J). B's heads learn from A's loss either way.
     """
 
     cache_size: int = 16
@@ -148,6 +153,7 @@ class JointConfig:
     interpenetration_weight: float = 0.1
     interpenetration_epsilon: float = 0.003
     physics_on_runtime: bool = True
+    trunk_from_runtime: bool = False
 
 
 @dataclass(frozen=True)

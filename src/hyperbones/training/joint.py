@@ -74,7 +74,7 @@ class JointTrainer(TeacherTrainer):
         """Module B then A on one cached frame, against C's garment there."""
         rollout, t = self.cache.sample()
         device = self.device
-        identity = apply_encoder(self.model, rollout.geometry)
+        identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime)
         rotations, positions = identity.bones.pose(rollout.skinning[t - 2: t + 1].to(device))  # (3,B,3,3), (3,B,3)
         to_local = heading_frame(rollout.joint_rotations[t, 0].to(device), rollout.root_translation[t].to(device))
         garment = module_a_frame(self.model.runtime, IdentityBatch.of([identity]), positions[None], rotations[-1:],
