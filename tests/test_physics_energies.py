@@ -217,3 +217,18 @@ def test_batched_calls_equal_per_sample_calls():
         assert whole.shape == (2, 3), name
         each = torch.stack([torch.stack([energy((b, t)) for t in range(3)]) for b in range(2)])
         assert torch.allclose(whole, each, rtol=1e-12, atol=1e-18), name
+
+
+@pytest.mark.parametrize("height", [1e-9, 1e-12, 0.0])
+def test_a_face_flattened_to_a_sliver_exerts_no_bending_force(height):
+    """Contact can flatten a triangle onto a line; its dihedral angle is then undefined and the
+    discrete-shell gradient grows as 1/height (9e6 N at 1e-12 m in float32, NaN forces in a
+    rollout). Below the near-degenerate bound the hinge is treated as flat."""
+    rest_vertices = torch.tensor([[0, 0, 0], [0.02, 0, 0], [0.01, 0.01, 0], [0.01, -0.01, 0.0]])
+    rest = ClothRest.from_mesh(rest_vertices, torch.tensor([[0, 1, 2], [1, 0, 3]]))
+    sliver = torch.tensor([[0, 0, 0], [0.02, 0, 0], [0.01, height, 0.0], [0.01, -0.01, 0.005]], requires_grad=True)
+    (gradient,) = torch.autograd.grad(bending_energy(sliver, rest), sliver)
+    assert torch.equal(gradient, torch.zeros_like(gradient))
+    healthy = torch.tensor([[0, 0, 0], [0.02, 0, 0], [0.01, 1e-3, 0.0], [0.01, -0.01, 0.005]], requires_grad=True)
+    (gradient,) = torch.autograd.grad(bending_energy(healthy, rest), healthy)
+    assert gradient.abs().max() > 1e-3  # a thin but real face (height/edge 0.05) still bends

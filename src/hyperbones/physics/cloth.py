@@ -42,8 +42,12 @@ def dihedral_angles(vertices: torch.Tensor, hinges: torch.Tensor) -> torch.Tenso
     sine = (torch.linalg.cross(n1, n2, dim=-1) * edge).sum(-1) / edge_length
     cosine = (n1 * n2).sum(-1)
     # atan2's gradient is 0/0 at (0, 0) (a degenerate face); feed it a harmless point there
-    # and mask the result, so the gradient stays finite (the "double where" trick).
-    degenerate = sine.square() + cosine.square() < 1e-40
+    # and mask the result, so the gradient stays finite (the "double where" trick). Nearly
+    # degenerate counts too: |n1||n2| below 1e-6 l⁴ (the two faces' height/edge ratios
+    # multiply to under 1e-6), where 1/(sine² + cosine²) overflows float32 in the gradient
+    # (a triangle of 6e-11 m² that contact had flattened gave NaN forces).
+    magnitude = sine.square() + cosine.square()  # (|n1||n2|)²
+    degenerate = (magnitude < 1e-40) | (magnitude < (1e-6 * edge_length ** 4).square())
     angle = torch.atan2(torch.where(degenerate, torch.zeros_like(sine), sine),
                         torch.where(degenerate, torch.ones_like(cosine), cosine))
     return torch.where(degenerate, torch.zeros_like(angle), angle)
