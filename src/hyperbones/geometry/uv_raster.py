@@ -22,12 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-
-from hyperbones.geometry.sparse import to_csr
 from scipy import ndimage
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.geodesic import mesh_components
+from hyperbones.geometry.sparse import to_csr
 
 PAD_PIXELS = 2
 
@@ -173,7 +172,7 @@ class UvRaster:
     def from_state_dict(cls, state: dict) -> "UvRaster":
         def matrix(name: str) -> torch.Tensor:
             return to_csr(torch.sparse_coo_tensor(state[f"{name}_indices"], state[f"{name}_values"],
-                                                tuple(state[f"{name}_shape"]), check_invariants=True))
+                                                  tuple(state[f"{name}_shape"]), check_invariants=True))
 
         return cls(int(state["resolution"]), matrix("raster"), matrix("sampler"), state["coverage"])
 

@@ -44,8 +44,9 @@ def dihedral_angles(vertices: torch.Tensor, hinges: torch.Tensor) -> torch.Tenso
     # atan2's gradient is 0/0 at (0, 0) (a degenerate face); feed it a harmless point there
     # and mask the result, so the gradient stays finite (the "double where" trick). Nearly
     # degenerate counts too: |n1||n2| below 1e-6 l⁴ (the two faces' height/edge ratios
-    # multiply to under 1e-6), where 1/(sine² + cosine²) overflows float32 in the gradient
-    # (a triangle of 6e-11 m² that contact had flattened gave NaN forces).
+    # multiply to under 1e-6). There the angle is undefined and its gradient grows as
+    # 1/height (9e6 N at 1e-12 m in float32); a triangle of 6e-11 m² that contact had
+    # flattened gave the teacher NaN forces.
     magnitude = sine.square() + cosine.square()  # (|n1||n2|)²
     degenerate = (magnitude < 1e-40) | (magnitude < (1e-6 * edge_length ** 4).square())
     angle = torch.atan2(torch.where(degenerate, torch.zeros_like(sine), sine),
