@@ -100,13 +100,14 @@ def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: S
     planes = ContactPlanes.tracked(nearest_before, body_after, proximity.faces, inside, margin)
     limited = limiter.project(positions, planes)
     after = proximity.query(limited, max_distance=query_distance)
+    held = torch.zeros_like(movable)
+    held[planes.vertex] = True
     for _ in range(rounds):
-        held = torch.zeros_like(movable)
-        held[planes.vertex] = True
-        left_inside = movable & ~held & (after.signed_distance < 0)
+        left_inside = movable & ~held & (after.signed_distance < 0)  # < 0: a face was found
         if not bool(left_inside.any()):
             break
         planes = planes + ContactPlanes.nearest(after, left_inside, margin)
+        held |= left_inside
         limited = limiter.project(limited, planes)
         after = proximity.query(limited, max_distance=query_distance)
     final = push_outside(limited, after, margin, movable=movable & (after.signed_distance < 0))

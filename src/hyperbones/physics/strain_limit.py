@@ -99,6 +99,9 @@ class StrainLimiter:
         return cls.build(rest.edges, rest.edge_lengths, rest.vertex_masses, pinned_mask)
 
     def to(self, device: torch.device | str) -> "StrainLimiter":
+        """The limiter on ``device``; itself when already there (its sparse matrices are built once)."""
+        if self.edges.device == torch.device(device):
+            return self
         return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),
                              self.edge_counts.to(device), self.stretch, self.compression, self.iterations)
 
