@@ -104,7 +104,7 @@ def test_two_process_ddp_training(tmp_path, body):
     config = tmp_path / "tiny.toml"
     config.write_text(TINY_TOML)
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    command = [sys.executable, "-m", "torch.distributed.run", "--nproc_per_node=2", "--master_port=29517",
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
                "-m", "hyperbones.cli", "train", "--config", str(config), "--out", str(tmp_path / "ddp"), "--quiet"]
     done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600,
                           cwd=Path(__file__).resolve().parents[1])

@@ -279,6 +279,9 @@ class TeacherTrainer:
         if self.writer:
             self.writer.close()
         if self.distributed and dist.is_initialized():
+            # Every rank reaches here before any tears the group down: a rank that destroys it
+            # while another still talks to it can leave that one waiting for good.
+            dist.barrier()
             dist.destroy_process_group()
 
 
