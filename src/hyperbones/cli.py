@@ -351,7 +351,8 @@ def build_parser() -> argparse.ArgumentParser:
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
     simulate.add_argument("--method", default="lbs",
                           help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet) "
-                               "or hyperbones (the per-frame bone runtime)")
+                               "hyperbones (the per-frame bone runtime) or physics (each frame's energy minimised "
+                               "by L-BFGS: slow, the teacher's reference)")
     simulate.add_argument("--checkpoint", default=None,
                           help="teacher or HyperBones checkpoint (default: the one shipped in the package)")
     simulate.add_argument("--device", default="auto", help="cpu, cuda or auto (CUDA when present; default)")
@@ -378,7 +379,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
                                 description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
     evaluation.add_argument("--methods", default="lbs",
-                            help="comma list of methods: lbs, teacher, hyperbones (default: lbs)")
+                            help="comma list of methods: lbs, teacher, hyperbones, physics (default: lbs); physics "
+                                 "minimises each frame's energy with L-BFGS, the teacher's slow reference")
     evaluation.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the shipped one)")
     evaluation.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     evaluation.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended to each motion")

@@ -38,7 +38,13 @@ def _hyperbones(*args, **kwargs):
     return HyperBonesMethod(*args, **kwargs)
 
 
-METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones}
+def _physics(*args, **kwargs):
+    from hyperbones.simulate.physics import PhysicsMethod
+
+    return PhysicsMethod(*args, **kwargs)
+
+
+METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones, "physics": _physics}
 """Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
 the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)

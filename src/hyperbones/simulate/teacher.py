@@ -1,41 +1,30 @@
-"""The teacher (Module C) as a simulation method: an autoregressive rollout over any length.
-
-Frame 0 is the draped garment skinned to the first pose (any cloth inside the body pushed
-out to the collision margin), relaxed by one long settling step with the body held still,
-as every training episode starts; each later frame is one teacher step. Pinned vertices
-follow the body by LBS. After every step, as in training, strain limiting keeps each edge
-within a narrow band of its rest length while cloth that ended inside the body goes back
-out on the side of the skin it came from (``physics.contact.constrain_step``); the moves
-are kept as velocity.
+"""The teacher (Module C) as a simulation method: an autoregressive rollout over any length,
+each step one network call (``models.teacher.teacher_step``); the start, the settling step
+and the per-step strain limiting and contact are ``simulate.rollout.StepRollout``'s.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from pathlib import Path
 
 import torch
-from tqdm import tqdm
 
-from hyperbones.body.anny_body import Body, PosedBody
+from hyperbones.body.anny_body import Body
 from hyperbones.errors import ParameterError
 from hyperbones.garment.garment import Garment
-from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.proximity import BodyProximity, push_outside
-from hyperbones.models.cloth_graph import FRAME_DT, GarmentTopology
+from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.contact import constrain_step
-from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
 from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.simulate.lbs import garment_skin_weights
+from hyperbones.simulate.rollout import StepRollout
 from hyperbones.training.checkpoint import SHIPPED_TEACHER
 from hyperbones.training.config import DataConfig
-from hyperbones.training.trainer import QUERY_DISTANCE, pick_device, teacher_from_checkpoint
+from hyperbones.training.trainer import pick_device, teacher_from_checkpoint
 
 
-class TeacherMethod:
+class TeacherMethod(StepRollout):
     """Garment positions rolled out by a trained teacher checkpoint."""
 
     name = "teacher"
@@ -66,33 +55,6 @@ class TeacherMethod:
         self.body_faces = body.faces.to(self.device)
         self.progress = progress
 
-    def run(self, posed: PosedBody) -> torch.Tensor:
-        """(T frames of a posed body) -> (T,V,3) garment positions on the CPU."""
-        frames = self.frames(posed)
-        return torch.stack([frame.cpu() for frame in tqdm(frames, total=posed.vertices.shape[0], desc="teacher",
-                                                         disable=not self.progress, unit="frame")])
-
-    @torch.no_grad()
-    def frames(self, posed: PosedBody) -> Iterator[torch.Tensor]:
-        """Yield each frame's (V,3) garment positions (on the method's device) as it is computed."""
-        skinned = linear_blend_skinning(self.canonical, self.skin_weights, posed.skinning_transforms)  # (T,V,3)
-        body = posed.vertices
-        proximity = BodyProximity(self.body_faces, device=self.device)
-        proximity.update(body[0].to(self.device))
-        start = skinned[0].to(self.device)
-        positions = push_outside(start, proximity.query(start, max_distance=QUERY_DISTANCE), COLLISION_EPSILON,
-                                 movable=self.movable)
-        velocities = torch.zeros_like(positions)
-        for t in range(body.shape[0]):
-            # Frame 0: settle on the still body; frame t > 0: the step from t-1 to t.
-            now, nxt = (0, 0) if t == 0 else (t - 1, t)
-            body_now, body_next = body[now].to(self.device), body[nxt].to(self.device)
-            nearest = proximity.query(positions, max_distance=QUERY_DISTANCE)  # the BVH holds body_now already
-            positions, velocities = teacher_step(self.model, self.topology, self.rest, positions, velocities,
-                                                 skinned[nxt].to(self.device), body_now, body_next, self.body_faces,
-                                                 nearest, self.settle_dt if t == 0 else FRAME_DT)
-            positions, velocities = constrain_step(positions, velocities, self.limiter, proximity, nearest, body_next,
-                                                   self.movable, COLLISION_EPSILON, QUERY_DISTANCE)
-            if t == 0:
-                velocities = torch.zeros_like(velocities)  # the first pose is held still before it
-            yield positions
+    def _step(self, positions, velocities, pinned_next, body_now, body_next, nearest, dt):
+        return teacher_step(self.model, self.topology, self.rest, positions, velocities, pinned_next, body_now,
+                            body_next, self.body_faces, nearest, dt)
