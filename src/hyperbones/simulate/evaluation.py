@@ -9,6 +9,20 @@ from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.metrics import HOOD_COLLISION_THRESHOLD, area_error_pct, collision_pct, edge_error_pct, mean_energies
 
 
+RUNAWAY_SPEED = 15.0  # m/s: faster than any body part in the clips (a kick's foot reaches ~8)
+
+
+def runaway_problem(metrics: dict) -> str | None:
+    """What is wrong with a rollout whose garment blew up or flew off (NaN, or a vertex
+    faster than ``RUNAWAY_SPEED``), from ``sequence_metrics``' result; None when it is sound."""
+    if not metrics["finite"]:
+        return "the garment's positions hold NaN or inf"
+    if not metrics["max_speed"] < RUNAWAY_SPEED:
+        return (f"a garment vertex reached {metrics['max_speed']:.1f} m/s (over {RUNAWAY_SPEED:g}: the garment ran "
+                f"away or fell off the body)")
+    return None
+
+
 def body_signed_distances(garment_vertices: torch.Tensor, body_vertices: torch.Tensor,
                           body_faces: torch.Tensor) -> torch.Tensor:
     """(T,V,3), (T,Vb,3), (Fb,3) -> (T,V) signed distance of each garment vertex to the posed body."""

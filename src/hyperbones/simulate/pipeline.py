@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import json
 import time
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,7 +23,7 @@ from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import load_motion
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
-from hyperbones.simulate.evaluation import sequence_metrics
+from hyperbones.simulate.evaluation import runaway_problem, sequence_metrics
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.lbs import LbsMethod
 
@@ -98,6 +99,10 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                     "method": method, "garment": garment if Path(garment).suffix == "" else Path(garment).name,
                     "garment_vertices": draped.num_vertices, "motion": the_motion.name, "body": shape.label(),
                     "fps": the_motion.fps})
+    problem = runaway_problem(metrics)
+    if problem:
+        warnings.warn(f"{method} on {metrics['garment']}, {metrics['motion']}: {problem}; its metrics mean little",
+                      stacklevel=2)
     return SimulationResult(draped, garment_vertices, posed.vertices, the_body.faces,
                             posed.joint_positions, the_motion.fps, metrics, rest.vertex_masses.float())
 

@@ -1,0 +1,34 @@
+"""Sequence metrics' soundness check: a rollout that blew up or fell off is named, not scored silently."""
+
+import pytest
+import torch
+
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.simulate.evaluation import RUNAWAY_SPEED, runaway_problem, sequence_metrics
+from hyperbones.simulate.pipeline import run_simulation
+
+
+def test_a_falling_or_nan_garment_is_reported_and_a_sound_one_is_not(body):
+    result = run_simulation("lbs", "long-skirt", "walk", None, frames=10, vertices=1500)
+    assert runaway_problem(result.metrics) is None
+    x = result.garment_vertices.double()
+    rest = ClothRest.from_mesh(result.garment.vertices.double(), result.garment.faces)
+
+    def metrics(trajectory):
+        return sequence_metrics(trajectory, rest, result.body_vertices, result.body_faces,
+                                origin=result.joint_positions[0, 0], dt=1.0 / result.fps)
+
+    # The same skirt in free fall from 2 s after it let go: it passes RUNAWAY_SPEED.
+    seconds = 2.0 + torch.arange(x.shape[0], dtype=x.dtype) / result.fps
+    falling = x.clone()
+    falling[..., 2] -= (0.5 * 9.81 * seconds.square())[:, None]
+    assert 9.81 * float(seconds[-1]) > RUNAWAY_SPEED and "m/s" in runaway_problem(metrics(falling))
+    broken = x.clone()
+    broken[5, 0] = float("nan")
+    assert "NaN" in runaway_problem(metrics(broken))
+
+
+def test_run_simulation_warns_when_the_garment_runs_away(monkeypatch, body):
+    monkeypatch.setattr("hyperbones.simulate.evaluation.RUNAWAY_SPEED", 1e-3)
+    with pytest.warns(UserWarning, match="lbs on long-skirt, walk: a garment vertex reached"):
+        run_simulation("lbs", "long-skirt", "walk", None, frames=10, vertices=1500)
