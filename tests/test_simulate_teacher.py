@@ -54,11 +54,11 @@ def test_missing_checkpoint_is_a_one_line_error(tmp_path, capsys):
     assert "none.pt: checkpoint not found" in capsys.readouterr().err
 
 
-def test_without_a_shipped_teacher_the_error_says_what_to_do(tmp_path, capsys):
-    from hyperbones.training.checkpoint import SHIPPED_TEACHER
+def test_the_shipped_teacher_is_the_default_and_rolls_out(capsys):
+    from hyperbones.training.checkpoint import SHIPPED_TEACHER, load_checkpoint
 
-    if SHIPPED_TEACHER.exists():
-        pytest.skip("a teacher checkpoint ships with the package")
-    assert main(["simulate", "--method", "teacher", "--garment", "tshirt", "--vertices", "1000", "--frames", "2",
-                 "--out", str(tmp_path / "o"), "--no-preview", "--quiet"]) == 2
-    assert "pass --checkpoint FILE" in capsys.readouterr().err
+    payload = load_checkpoint(SHIPPED_TEACHER)
+    assert payload["step"] == payload["config"]["train"]["steps"] and "optimizer" not in payload
+    assert SHIPPED_TEACHER.with_suffix(".md").exists()
+    result = run_simulation("teacher", "tshirt", "walk", None, frames=4, vertices=1000, device="cpu")
+    assert torch.isfinite(result.garment_vertices).all() and result.metrics["collision_pct"] < 5

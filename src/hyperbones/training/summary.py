@@ -11,8 +11,13 @@ TERMS = ("loss", "stretching", "bending", "gravity", "inertia", "collision", "fr
 
 def read_scalars(log_dir: str | Path) -> dict[str, list[tuple[int, float]]]:
     """{tag without the "train/" prefix: [(step, value), ...]} from every event file under ``log_dir``."""
+    import logging
+
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
+    # A resumed run's log restarts at its checkpoint's step (purge_step); TensorBoard then
+    # logs a multi-line notice per resume that says nothing the summary needs.
+    logging.getLogger("tensorboard").setLevel(logging.ERROR)
     accumulator = EventAccumulator(str(log_dir), size_guidance={"scalars": 0})
     accumulator.Reload()
     out = {}
