@@ -194,8 +194,10 @@ def cmd_train(args) -> int:
     trainer = kind(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
     try:
         step = trainer.train()
-    finally:
-        trainer.close()
+    except BaseException:
+        trainer.close(finished=False)
+        raise
+    trainer.close()
     if trainer.is_main:
         print(f"trained to step {step}; checkpoint {trainer.checkpoint_path.resolve()}, "
               f"TensorBoard logs {(trainer.run_dir / 'tensorboard').resolve()}")

@@ -19,6 +19,7 @@ from hyperbones.motion.load import capture_rate, load_motion
 from hyperbones.simulate.evaluation import kinetic_energy, runaway_problem
 from hyperbones.simulate.pipeline import run_simulation
 
+
 def stability_table(method: str, garments: list[str], motions: list[str], *, frames: int = 1000,
                     vertices: int | None = None, body: str | None = None, checkpoint: str | None = None,
                     device: str = "auto", source_fps: dict[str, float] | None = None, progress: bool = True) -> str:

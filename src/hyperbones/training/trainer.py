@@ -275,10 +275,13 @@ class TeacherTrainer:
             "config": self.config.as_dict(), "ema": self.ema,
         })
 
-    def close(self) -> None:
+    def close(self, finished: bool = True) -> None:
+        """Flush the logs; after a ``finished`` run, leave the process group with the other
+        ranks. A rank that failed leaves it alone: the others may be mid-collective, and its
+        exit is what lets torchrun stop them."""
         if self.writer:
             self.writer.close()
-        if self.distributed and dist.is_initialized():
+        if finished and self.distributed and dist.is_initialized():
             # Every rank reaches here before any tears the group down: a rank that destroys it
             # while another still talks to it can leave that one waiting for good.
             dist.barrier()
