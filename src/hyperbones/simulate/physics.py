@@ -18,10 +18,7 @@ import torch
 
 from hyperbones.body.anny_body import Body
 from hyperbones.garment.garment import Garment
-from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
-from hyperbones.physics.strain_limit import StrainLimiter
-from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.simulate.rollout import StepRollout
 from hyperbones.training.config import DataConfig, TrainConfig
 from hyperbones.training.loss import physics_terms
@@ -43,16 +40,7 @@ class PhysicsMethod(StepRollout):
         self.iterations = int(iterations)
         self.settle_dt = DataConfig().settle_dt
         self.collision_weight = TrainConfig().collision_weight_end
-        material = material or garment.material
-        self.rest = ClothRest.from_mesh(rest_vertices.float(), garment.faces, material).to(self.device)
-        pinned = torch.zeros(garment.vertices.shape[0], dtype=torch.bool)
-        pinned[garment.pinned] = True
-        self.movable = ~pinned.to(self.device)
-        self.limiter = StrainLimiter.for_cloth(self.rest, pinned.to(self.device))
-        self.canonical = garment.vertices
-        self.skin_weights = garment_skin_weights(garment, body)
-        self.body_faces = body.faces.to(self.device)
-        self.progress = progress
+        self._prepare_cloth(garment, body, rest_vertices, material or garment.material, progress)
 
     def _step(self, positions, velocities, pinned_next, body_now, body_next, nearest, dt):
         guess = torch.where(self.movable[:, None], positions + velocities, pinned_next)

@@ -16,22 +16,42 @@ from collections.abc import Iterator
 import torch
 from tqdm import tqdm
 
-from hyperbones.body.anny_body import PosedBody
+from hyperbones.body.anny_body import Body, PosedBody
+from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, Nearest, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT
+from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
+from hyperbones.physics.material import Material
+from hyperbones.physics.strain_limit import StrainLimiter
+from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.training.trainer import QUERY_DISTANCE
 
 
 class StepRollout:
-    """Base of the step-based methods. A subclass sets ``name``, ``device``, ``settle_dt``
-    (s, the first step's length), ``movable`` (V,) bool, ``limiter`` (``StrainLimiter``),
-    ``canonical`` (V,3), ``skin_weights`` (V,J), ``body_faces`` (F,3) and ``progress``, and
-    implements ``_step``."""
+    """Base of the step-based methods. A subclass sets ``name``, ``device`` and ``settle_dt``
+    (s, the first step's length), calls ``_prepare_cloth`` and implements ``_step``."""
 
     name = "step"
+
+    def _prepare_cloth(self, garment: Garment, body: Body, rest_vertices: torch.Tensor, material: Material,
+                       progress: bool) -> ClothRest:
+        """Set what every step-based rollout needs on ``self.device``: ``rest`` (``ClothRest``),
+        ``movable`` (V,) bool, ``limiter``, ``canonical`` (V,3), ``skin_weights`` (V,J),
+        ``body_faces`` and ``progress``. Returns the rest state on the CPU."""
+        rest = ClothRest.from_mesh(rest_vertices.float(), garment.faces, material)
+        self.rest = rest.to(self.device)
+        pinned = torch.zeros(garment.num_vertices, dtype=torch.bool, device=self.device)
+        pinned[garment.pinned.to(self.device)] = True
+        self.movable = ~pinned
+        self.limiter = StrainLimiter.for_cloth(self.rest, pinned)
+        self.canonical = garment.vertices
+        self.skin_weights = garment_skin_weights(garment, body)
+        self.body_faces = body.faces.to(self.device)
+        self.progress = progress
+        return rest
 
     def _step(self, positions: torch.Tensor, velocities: torch.Tensor, pinned_next: torch.Tensor,
               body_now: torch.Tensor, body_next: torch.Tensor, nearest: Nearest, dt: float

@@ -14,10 +14,7 @@ from hyperbones.errors import ParameterError
 from hyperbones.garment.garment import Garment
 from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.models.teacher import Teacher, teacher_step
-from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
-from hyperbones.physics.strain_limit import StrainLimiter
-from hyperbones.simulate.lbs import garment_skin_weights
 from hyperbones.simulate.rollout import StepRollout
 from hyperbones.training.checkpoint import SHIPPED_TEACHER
 from hyperbones.training.config import DataConfig
@@ -44,16 +41,9 @@ class TeacherMethod(StepRollout):
             self.model, payload = teacher_from_checkpoint(checkpoint or SHIPPED_TEACHER, self.device)
             self.settle_dt = float(payload["config"]["data"]["settle_dt"])
         material = material or garment.material
-        rest = ClothRest.from_mesh(rest_vertices.float(), garment.faces, material)
-        self.rest = rest.to(self.device)
+        rest = self._prepare_cloth(garment, body, rest_vertices, material, progress)
         self.topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
                                               material).to(self.device)
-        self.limiter = StrainLimiter.for_cloth(self.rest, self.topology.pinned_mask)
-        self.movable = ~self.topology.pinned_mask
-        self.canonical = garment.vertices
-        self.skin_weights = garment_skin_weights(garment, body)
-        self.body_faces = body.faces.to(self.device)
-        self.progress = progress
 
     def _step(self, positions, velocities, pinned_next, body_now, body_next, nearest, dt):
         return teacher_step(self.model, self.topology, self.rest, positions, velocities, pinned_next, body_now,
