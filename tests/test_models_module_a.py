@@ -5,6 +5,7 @@ import math
 import pytest
 import torch
 
+from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.models.module_a import (ModuleA, ModuleAConfig, bone_window_features, correct_bones,
                                         heading_frame)
@@ -28,10 +29,28 @@ def test_window_features():
     window = torch.zeros(2, 3, 8, 3)
     window[:, 2, :, 0] = 0.01  # one centimetre along x in the last frame
     features = bone_window_features(window)
-    assert features.shape == (2, 15 * 8)
-    displacement = features[:, 9 * 8:].reshape(2, 8, 2, 3)
+    assert features.shape == (2, ModuleAConfig(num_bones=8).window_features) == (2, 9 * 8)
+    assert torch.allclose(features[:, : 3 * 8].reshape(2, 8, 3)[..., 0], torch.full((2, 8), 0.01))  # positions at t
+    displacement = features[:, 3 * 8:].reshape(2, 8, 2, 3)
     assert torch.allclose(displacement[:, :, 1, 0], torch.ones(2, 8))  # centimetres per frame
     assert torch.allclose(displacement[:, :, 0], torch.zeros(2, 8, 3))
+
+
+def test_a_longer_window_sees_motion_that_a_short_one_has_forgotten():
+    """A bone moved 5 frames ago, then stood still: K = 3 sees only stillness, K = 8 the move."""
+    window = torch.zeros(1, 8, 4, 3)
+    window[:, 3:, :, 2] = 0.02  # the move is between frames 2 and 3 of eight
+    still = torch.zeros_like(window[:, -3:])
+    still[:] = window[:, -1:]
+    assert torch.equal(bone_window_features(window[:, -3:]), bone_window_features(still))
+    long = bone_window_features(window)
+    assert long.shape == (1, ModuleAConfig(num_bones=4, window_frames=8).window_features)
+    assert long[:, 3 * 4:].abs().sum() > 0
+
+
+def test_window_of_one_frame_is_refused():
+    with pytest.raises(ParameterError, match="window_frames"):
+        ModuleAConfig(window_frames=1)
 
 
 def test_untrained_module_a_changes_nothing():
@@ -40,7 +59,7 @@ def test_untrained_module_a_changes_nothing():
     film = model.modulator(torch.randn(3, SMALL.shape_code))
     assert torch.allclose(film[:, :, 0], torch.ones(3, SMALL.layers, SMALL.hidden))
     assert torch.allclose(film[:, :, 1], torch.zeros(3, SMALL.layers, SMALL.hidden))
-    delta, embedding = model.bone_net(torch.randn(3, 15 * SMALL.num_bones), film)
+    delta, embedding = model.bone_net(torch.randn(3, SMALL.window_features), film)
     assert delta.shape == (3, SMALL.num_bones, 9) and embedding.shape == (3, SMALL.pose_embedding)
     assert torch.equal(delta, torch.zeros_like(delta))
     images = model.refine(torch.randn(3, 3, 16, 16), torch.ones(3, 1, 16, 16), torch.randn(3, 5, 16, 16), embedding)
@@ -52,7 +71,7 @@ def test_film_changes_the_output():
     model = ModuleA(SMALL)
     for layer in (model.bone_net.corrections, model.modulator.net[-1]):
         torch.nn.init.normal_(layer.weight, std=0.1)
-    features = torch.randn(1, 15 * SMALL.num_bones)
+    features = torch.randn(1, SMALL.window_features)
     a = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
     b = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
     assert (a - b).abs().max() > 1e-3

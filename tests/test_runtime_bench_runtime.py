@@ -26,10 +26,12 @@ def test_bench_runtime_command(tmp_path, body, capsys):
     rotations, roots = load_motion_npz(motion)
     assert rotations.shape[1:] == (31, 3, 3) and roots.shape == (rotations.shape[0], 3)
     out = tmp_path / "rt.json"
+    late = rotations.shape[0] + 5  # past the motion's end: the pose is held
     assert main(["bench-runtime", "--identity", str(cache), "--motion", str(motion), "--uv-resolution", "16",
-                 "--batch", "2", "--frames", "3", "--warmup", "1", "--json", str(out)]) == 0
-    (record,) = json.loads(out.read_text())
+                 "--batch", "2", "--frames", "3", "--warmup", "1", "--late", str(late), "--json", str(out)]) == 0
+    record, later = json.loads(out.read_text())
     assert record["method"] == "hyperbones@16" and record["batch"] == 2 and record["ms_per_frame"] > 0
+    assert (record["from_frame"], later["from_frame"]) == (1, late) and later["ms_per_frame"] > 0
     assert record["vertices"] == identity.num_vertices and record["garment"] == "dress"
     assert "timing only" in capsys.readouterr().out
 
@@ -53,3 +55,16 @@ def test_bad_motion_file(tmp_path):
         load_motion_npz(bad)
     with pytest.raises(InputFileError, match="motion file not found"):
         load_motion_npz(tmp_path / "none.npz")
+
+
+def test_timed_blocks_time_the_frames_asked_for():
+    from hyperbones.errors import ParameterError
+    from hyperbones.runtime.timing import timed_blocks
+
+    seen = []
+    blocks = timed_blocks(seen.append, torch.device("cpu"), warmup=2, frames=3, late=10)
+    assert seen == list(range(13)) and [first for first, _ in blocks] == [2, 10]
+    assert all(ms >= 0 for _, ms in blocks)
+    with pytest.raises(ParameterError, match="--late 3 must come after the first timed block"):
+        timed_blocks(seen.append, torch.device("cpu"), warmup=2, frames=3, late=3)
+

@@ -39,10 +39,11 @@ def test_hyperbones_and_its_teacher_simulate(joint_checkpoint):
 def test_bench_reports_the_speedup(joint_checkpoint, tmp_path, capsys):
     record_file = tmp_path / "bench.json"
     assert main(["bench", "--methods", "teacher,hyperbones", "--garments", "tshirt", "--vertices", "1000",
-                 "--frames", "3", "--warmup", "1", "--checkpoint", str(joint_checkpoint), "--device", "cpu",
-                 "--uv-resolution", "32", "--json", str(record_file), "--quiet"]) == 0
+                 "--frames", "3", "--warmup", "1", "--late", "6", "--checkpoint", str(joint_checkpoint),
+                 "--device", "cpu", "--uv-resolution", "32", "--json", str(record_file), "--quiet"]) == 0
     records = json.loads(record_file.read_text())
-    assert [r["method"] for r in records] == ["teacher", "hyperbones"]
+    assert [(r["method"], r["from_frame"]) for r in records] == [("teacher", 1), ("teacher", 6), ("hyperbones", 1),
+                                                                 ("hyperbones", 6)]
     out = capsys.readouterr().out
     assert "| hyperbones | tshirt |" in out and "hyperbones is " in out and "faster than the teacher on tshirt" in out
 

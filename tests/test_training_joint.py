@@ -3,7 +3,7 @@
 import pytest
 import torch
 
-from hyperbones.errors import InputFileError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.training.checkpoint import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig, JointConfig, TeacherTrainingConfig, load_config
 from hyperbones.training.joint import JointTrainer
@@ -92,4 +92,34 @@ def test_joint_steps_from_a_teacher_run(tmp_path, body):
     joint_state = load_checkpoint(tmp_path / "joint" / "checkpoint.pt")["model"]
     assert all(torch.equal(value, joint_state[f"teacher.{name}"]) for name, value in again.teacher.state_dict().items())
     again.close()
+
+
+def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
+    """joint.train_teacher = false: C and the trunk stay as phase 1 left them; A and B's heads
+    learn, on a window longer than the paper's three frames."""
+    teacher_run = tmp_path / "teacher"
+    phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=1)
+    phase_one.train()
+    phase_one.close()
+    values = {**TINY_JOINT, "runtime": {**TINY_JOINT["runtime"], "window_frames": 5},
+              "joint": {**TINY_JOINT["joint"], "train_teacher": False, "frames_per_step": 2},
+              "train": {**TINY["train"], "init_from": str(teacher_run / "checkpoint.pt")}}
+    with pytest.raises(ParameterError, match="trunk_from_runtime needs joint.train_teacher"):
+        JointTrainer(HyperBonesTrainingConfig.from_dict(
+            {**values, "joint": {**values["joint"], "trunk_from_runtime": True}}), tmp_path / "bad", progress=False)
+    trainer = JointTrainer(HyperBonesTrainingConfig.from_dict(values), tmp_path / "joint", progress=False, max_steps=2)
+    teacher_before = {k: v.clone() for k, v in trainer.teacher.state_dict().items()}
+    runtime_before = [p.detach().clone() for p in trainer.model.runtime.parameters()]
+    logs = trainer._advance()
+    assert "stretching" not in logs and logs["a_mse"] > 0 and torch.isfinite(torch.tensor(logs["loss"]))
+    assert all(torch.equal(v, trainer.teacher.state_dict()[k]) for k, v in teacher_before.items())
+    assert any(not torch.equal(a, b) for a, b in zip(runtime_before, trainer.model.runtime.parameters()))
+    assert any(r.latents is not None for r in trainer.cache.rollouts)
+    trainer.step += 1
+    assert trainer.train() == 2
+    trainer.close()
+    # Only A's and B's parameters have optimiser state, and the stored moving average leaves C out.
+    assert len(trainer.optimizer.state) == sum(1 for p in trainer.model.parameters() if p.requires_grad)
+    raw = torch.load(tmp_path / "joint" / "checkpoint.pt", weights_only=True)
+    assert raw["ema"] and not any(k.startswith("teacher.") for k in raw["ema"])
 

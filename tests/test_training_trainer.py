@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from hyperbones.errors import ParameterError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.training.checkpoint import export_weights, load_checkpoint
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.loss import collision_weight_at
@@ -70,6 +70,12 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
     assert torch.equal(model.state_dict()[name], average)
     assert list((tmp_path / "run" / "tensorboard").iterdir())
 
+    # The optimiser's state sits beside the checkpoint; buffers equal to the model's are
+    # left out of the stored moving average (load_checkpoint fills them back in).
+    raw = torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True)
+    assert "optimizer" not in raw and "node_normalizer.sum" not in raw["ema"]
+    assert torch.load(tmp_path / "run" / "optimizer.pt", weights_only=True)["step"] == 2
+
     with pytest.raises(ParameterError, match="--resume"):
         TeacherTrainer(config, tmp_path / "run", progress=False)
     resumed = TeacherTrainer(config, tmp_path / "run", resume=True, progress=False)
@@ -78,6 +84,18 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
     assert resumed.train() == 4
     resumed.close()
     assert load_checkpoint(tmp_path / "run" / "checkpoint.pt")["step"] == 4
+
+    # An optimiser state from another step is refused; an older checkpoint with the state inside resumes.
+    state = torch.load(tmp_path / "run" / "optimizer.pt", weights_only=True)
+    torch.save({**state, "step": 3}, tmp_path / "run" / "optimizer.pt")
+    with pytest.raises(InputFileError, match="optimizer.pt: from step 3, but the checkpoint is at step 4"):
+        TeacherTrainer(config, tmp_path / "run", resume=True, progress=False)
+    torch.save({**torch.load(tmp_path / "run" / "checkpoint.pt", weights_only=True), "optimizer": state["optimizer"]},
+               tmp_path / "run" / "checkpoint.pt")
+    (tmp_path / "run" / "optimizer.pt").unlink()
+    older = TeacherTrainer(config, tmp_path / "run", resume=True, progress=False)
+    assert older.step == 4 and older.optimizer.state
+    older.close()
 
     other = TeacherTrainingConfig.from_dict({**TINY, "train": {**TINY["train"], "learning_rate": 1e-3}})
     with pytest.raises(ParameterError, match="different config"):

@@ -233,8 +233,8 @@ def cmd_bench(args) -> int:
     from hyperbones.runtime.timing import speedups
 
     records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
-                    device=args.device, frames=args.frames, warmup=args.warmup, checkpoint=args.checkpoint,
-                    uv_resolution=args.uv_resolution, progress=not args.quiet)
+                    device=args.device, frames=args.frames, warmup=args.warmup, late=args.late,
+                    checkpoint=args.checkpoint, uv_resolution=args.uv_resolution, progress=not args.quiet)
     _report_records(records, args.json, speedups(records))
     return 0
 
@@ -285,7 +285,8 @@ def cmd_bench_runtime(args) -> int:
     from hyperbones.runtime.bench_runtime import bench_runtime
 
     records = bench_runtime(args.identity, args.motion, checkpoint=args.checkpoint, uv_resolution=args.uv_resolution,
-                            device=args.device, batch=args.batch, frames=args.frames, warmup=args.warmup)
+                            device=args.device, batch=args.batch, frames=args.frames, warmup=args.warmup,
+                            late=args.late)
     _report_records(records, args.json, [] if args.checkpoint else ["(Module A freshly initialised: timing only)"])
     return 0
 
@@ -419,7 +420,7 @@ def build_parser() -> argparse.ArgumentParser:
     bench = sub.add_parser("bench", help="median ms per frame of each method on each garment",
                            description="Times each method frame by frame on the default body walking, after a warm-up "
                                        "(CUDA timings synchronised). Prints a table; --json writes records "
-                                       "{method, garment, vertices, device, batch, ms_per_frame}.")
+                                       "{method, garment, vertices, device, batch, ms_per_frame, from_frame}.")
     bench.add_argument("--methods", default="lbs,teacher", help="comma list of lbs, teacher, hyperbones "
                                                                 "(default: lbs,teacher)")
     bench.add_argument("--garments", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
@@ -428,6 +429,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     bench.add_argument("--frames", type=int, default=30, help="timed frames per run (default 30)")
     bench.add_argument("--warmup", type=int, default=5, help="untimed frames first (default 5)")
+    bench.add_argument("--late", type=int, default=None,
+                       help="also time the --frames frames from this frame on (e.g. 1000), to show that the cost "
+                            "per frame does not grow with the motion's length")
     bench.add_argument("--checkpoint", default=None,
                        help="checkpoint for the learnt methods (a HyperBones one holds its teacher too; "
                             "default: the shipped ones)")
@@ -466,6 +470,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench_rt.add_argument("--batch", type=int, default=1, help="characters stepped together (default 1)")
     bench_rt.add_argument("--frames", type=int, default=60, help="timed frames (default 60)")
     bench_rt.add_argument("--warmup", type=int, default=10, help="untimed frames first (default 10)")
+    bench_rt.add_argument("--late", type=int, default=None,
+                          help="also time the --frames frames from this frame on (e.g. 1000), to show that the cost "
+                            "per frame does not grow with the motion's length")
     bench_rt.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench_rt.set_defaults(func=cmd_bench_runtime)
 

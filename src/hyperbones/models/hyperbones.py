@@ -53,13 +53,20 @@ class HyperBonesModel(nn.Module):
         model.load_state_dict(payload.get("ema") or payload["model"])
         return model.eval()
 
-    def encode(self, graph: ClothGraph, train_trunk: bool = True) -> IdentityCode:
-        """Module B: the trunk over the canonical graph, then the heads on the garment nodes.
+    def trunk_latents(self, graph: ClothGraph, train_trunk: bool = True) -> torch.Tensor:
+        """The shared trunk over the canonical graph: the garment nodes' latents (V,latent).
 
         The canonical graph (still body, zero velocities) is not a state C steps from, so it
         never adds to the trunk's input statistics. ``train_trunk`` False runs the trunk
-        without gradient: a loss on B's output then trains B's heads only.
+        without gradient.
         """
         with frozen_statistics(self.teacher), torch.set_grad_enabled(train_trunk and torch.is_grad_enabled()):
-            latents = self.teacher.encode(graph)[: graph.num_garment]
-        return self.encoder(latents)
+            return self.teacher.encode(graph)[: graph.num_garment]
+
+    def encode(self, graph: ClothGraph, train_trunk: bool = True, latents: torch.Tensor | None = None) -> IdentityCode:
+        """Module B: the trunk over the canonical graph, then the heads on the garment nodes.
+
+        ``train_trunk`` False: a loss on B's output trains B's heads only. ``latents``: the
+        trunk's output for this graph, computed before (a frozen trunk's never changes).
+        """
+        return self.encoder(self.trunk_latents(graph, train_trunk) if latents is None else latents)

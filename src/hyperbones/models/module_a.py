@@ -10,9 +10,13 @@ Everything here lives in the character's local frame (``heading_frame``): origin
 Hips, Z up, X/Y turned with the character's heading. The network therefore sees the same
 input for the same motion in any place and facing direction, and gravity stays along −Z.
 
-Input window: bone positions at t−2, t−1, t and their frame-to-frame displacements
-(t−1)−(t−2) and t−(t−1): first and second differences from three frames. Positions are in
-metres, displacements in centimetres per frame (both of order one).
+Input window: the bones' positions at t and their frame-to-frame displacements over the last
+K frames (``window_frames``; the paper's K = 3: (t−1)−(t−2) and t−(t−1), first and second
+differences). The positions at t−1 … t−K+1 are these minus the displacements, so this is the
+paper's input without its redundant copies. Positions are in metres, displacements in
+centimetres per frame (both of order one). A window longer than the paper's lets the output
+keep changing for K−1 frames after the body stops: with K = 3 a still body freezes the
+garment two frames later, so no swing after a stop can be expressed.
 
 Corrections: the 6D rotation of each bone frame (first two columns of its rotation) gets
 Δ6D added before Gram–Schmidt (the paper's rule), its position Δt (the network's output in
@@ -28,6 +32,7 @@ import roma
 import torch
 from torch import nn
 
+from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.motion.motion import heading_angle
 
@@ -41,6 +46,7 @@ class ModuleAConfig:
     num_bones: B virtual bones.  shape_code: d_z.  hidden/layers: Bone-Net (4 × 256).
     pose_embedding: channels of the broadcast pose embedding φ.  uv_features: d_f of F_UV.
     uv_resolution: R of the UV maps (paper 512; smaller costs less per frame on a CPU).
+    window_frames: K frames of bone motion Bone-Net sees (paper 3).
     conv_channels: the Conv-MLP's hidden widths (64, 128, 64), then 3.
     use_conv: False drops Stage 2 (the "no Conv-MLP" ablation).
     """
@@ -54,6 +60,16 @@ class ModuleAConfig:
     uv_resolution: int = 128
     conv_channels: tuple[int, int, int] = (64, 128, 64)
     use_conv: bool = True
+    window_frames: int = 3
+
+    def __post_init__(self):
+        if self.window_frames < 2:
+            raise ParameterError(f"runtime.window_frames must be at least 2 (a position and a velocity), got {self.window_frames}")
+
+    @property
+    def window_features(self) -> int:
+        """Bone-Net's input width: 3 numbers per bone for the position at t and each of the K−1 displacements."""
+        return 3 * self.window_frames * self.num_bones
 
     @classmethod
     def from_dict(cls, values: dict) -> "ModuleAConfig":
@@ -79,9 +95,10 @@ def heading_frame(root_rotation: torch.Tensor, root_position: torch.Tensor) -> t
 
 
 def bone_window_features(window: torch.Tensor) -> torch.Tensor:
-    """(N,3,B,3) local bone positions at t−2, t−1, t -> (N, 15·B) Bone-Net input."""
-    displacement = (window[:, 1:] - window[:, :-1]) / CENTIMETRE  # (N,2,B,3)
-    return torch.cat([window.transpose(1, 2).flatten(1), displacement.transpose(1, 2).flatten(1)], dim=1)
+    """(N,K,B,3) local bone positions at t−K+1 … t -> (N, 3·K·B) Bone-Net input:
+    the positions at t (m), then per bone its K−1 displacements (cm per frame, oldest first)."""
+    displacement = (window[:, 1:] - window[:, :-1]) / CENTIMETRE  # (N,K-1,B,3)
+    return torch.cat([window[:, -1].flatten(1), displacement.transpose(1, 2).flatten(1)], dim=1)
 
 
 class ShapeModulator(nn.Module):
@@ -106,7 +123,7 @@ class ShapeModulator(nn.Module):
 
 
 class BoneNet(nn.Module):
-    """Bone window features (N,15B) and FiLM (N,layers,2,hidden) -> ΔT (N,B,9), φ (N,P).
+    """Bone window features (N,3KB) and FiLM (N,layers,2,hidden) -> ΔT (N,B,9), φ (N,P).
 
     ΔT per bone: Δ6D (6) then Δt in metres (3).
     """
@@ -114,7 +131,7 @@ class BoneNet(nn.Module):
     def __init__(self, config: ModuleAConfig):
         super().__init__()
         self.num_bones = config.num_bones
-        sizes = [15 * config.num_bones] + [config.hidden] * config.layers
+        sizes = [config.window_features] + [config.hidden] * config.layers
         self.hidden_layers = nn.ModuleList(nn.Linear(a, b) for a, b in zip(sizes[:-1], sizes[1:]))
         self.corrections = nn.Linear(config.hidden, 9 * config.num_bones)
         self.pose_embedding = nn.Linear(config.hidden, config.pose_embedding)

@@ -2,14 +2,12 @@
 
 Every method runs on the default body over a built-in walk; the first ``warmup`` frames
 are not timed (caches, allocator, JIT), then each frame is timed on its own (CUDA work is
-synchronised before the clock is read) and the median is reported. Posing the body is
+synchronised before the clock is read) and the median is reported; ``late`` adds a second
+timed block that far into the motion, to show that the cost does not grow with it. Posing the body is
 not part of a method's frame: it is shared by all methods and done beforehand.
 """
 
 from __future__ import annotations
-
-import statistics
-import time
 
 import torch
 from tqdm import tqdm
@@ -20,14 +18,16 @@ from hyperbones.errors import ParameterError
 from hyperbones.motion.load import load_motion
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.pipeline import METHODS
-from hyperbones.runtime.timing import BenchRecord, synchronize
+from hyperbones.runtime.timing import BenchRecord, timed_blocks
 from hyperbones.training.trainer import pick_device
 
 
 def bench(methods: list[str], garments: list[str], *, vertices: int | None = None, device: str = "auto",
-          frames: int = 30, warmup: int = 5, checkpoint: str | None = None, uv_resolution: int | None = None,
-          progress: bool = True) -> list[BenchRecord]:
-    """Time ``frames`` frames after ``warmup`` for each method × garment; one record each.
+          frames: int = 30, warmup: int = 5, late: int | None = None, checkpoint: str | None = None,
+          uv_resolution: int | None = None, progress: bool = True) -> list[BenchRecord]:
+    """Time ``frames`` frames after ``warmup`` for each method × garment; one record each, and
+    a second one for the ``frames`` frames from frame ``late`` on when given (the walk is then
+    held still at its last pose for as long as it takes to get there).
 
     uv_resolution: the UV maps' R for the hyperbones method (default: its training one).
     """
@@ -38,7 +38,9 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
         raise ParameterError("--frames must be >= 1 and --warmup >= 0")
     the_device = pick_device(device)
     body = body_for(BodyShape())
-    motion = load_motion("walk", body).slice(0, warmup + frames)
+    length = (late if late is not None else warmup) + frames
+    motion = load_motion("walk", body)
+    motion = motion.with_hold(max(0, length - motion.num_frames)).slice(0, length)
     posed = body.pose(motion.joint_rotations, motion.root_translation)
     records = []
     for garment_name in tqdm(garments, desc="bench", disable=not progress):
@@ -47,15 +49,8 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
             extra = {"uv_resolution": uv_resolution} if method == "hyperbones" else {}
             solver = METHODS[method](garment, body, rest_vertices=rest_vertices, material=garment.material,
                                      checkpoint=checkpoint, device=str(the_device), **extra)
-            times = []
             stream = solver.frames(posed)
-            for index in range(warmup + frames):
-                synchronize(the_device)
-                start = time.perf_counter()
-                next(stream)
-                synchronize(the_device)
-                if index >= warmup:
-                    times.append(1000.0 * (time.perf_counter() - start))
-            records.append(BenchRecord(method, garment_name, garment.num_vertices, the_device.type, 1,
-                                       statistics.median(times)))
+            for first, median in timed_blocks(lambda t: next(stream), the_device, warmup, frames, late):
+                records.append(BenchRecord(method, garment_name, garment.num_vertices, the_device.type, 1, median,
+                                           first))
     return records

@@ -10,8 +10,6 @@ Without a checkpoint, Module A's weights are freshly initialised: the timing is 
 
 from __future__ import annotations
 
-import statistics
-import time
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +19,7 @@ from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.models.module_a import ModuleA, ModuleAConfig
 from hyperbones.runtime.identity import Identity
 from hyperbones.runtime.simulator import Simulator, load_module_a
-from hyperbones.runtime.timing import BenchRecord, synchronize
+from hyperbones.runtime.timing import BenchRecord, timed_blocks
 
 
 def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
@@ -40,16 +38,16 @@ def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
 
 def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | None = None,
                   uv_resolution: int | None = None, device: str = "cpu", batch: int = 1, frames: int = 60,
-                  warmup: int = 10) -> list[BenchRecord]:
-    """One record per identity cache: median ms per frame (for the whole batch) of ``Simulator.step``."""
+                  warmup: int = 10, late: int | None = None) -> list[BenchRecord]:
+    """One record per identity cache: median ms per frame (for the whole batch) of ``Simulator.step``;
+    with ``late``, a second record for the frames from ``late`` on (past the motion's end the
+    pose is held)."""
     if batch < 1 or frames < 1 or warmup < 0:
         raise ParameterError("--batch and --frames must be >= 1, --warmup >= 0")
     the_device = torch.device(device)
     if the_device.type == "cuda" and not torch.cuda.is_available():
         raise ParameterError("--device cuda asked for, but CUDA is not available")
     rotations, roots = load_motion_npz(motion)
-    if rotations.shape[0] < warmup + frames:
-        raise ParameterError(f"{motion}: {rotations.shape[0]} frames, fewer than --warmup + --frames")
     trained = load_module_a(checkpoint) if checkpoint else None
     records = []
     for path in identity_paths:
@@ -65,17 +63,14 @@ def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | N
                                              uv_features=identity.vertex_features.shape[1],
                                              uv_resolution=resolution))
         simulator = Simulator(module_a, [identity] * batch, the_device)
-        times = []
-        for t in range(warmup + frames):
-            step_rotations = rotations[t].expand(batch, 31, 3, 3).to(the_device)
-            step_roots = roots[t].expand(batch, 3).to(the_device)
-            synchronize(the_device)
-            start = time.perf_counter()
-            simulator.step(step_rotations, step_roots)
-            synchronize(the_device)
-            if t >= warmup:
-                times.append(1000.0 * (time.perf_counter() - start))
-        records.append(BenchRecord(f"hyperbones@{resolution}", identity.name, identity.num_vertices,
-                                   the_device.type, batch, statistics.median(times)))
+
+        def step(t: int) -> None:
+            t = min(t, rotations.shape[0] - 1)  # past the motion's end: held at its last pose
+            simulator.step(rotations[t].expand(batch, 31, 3, 3).to(the_device),
+                           roots[t].expand(batch, 3).to(the_device))
+
+        for first, median in timed_blocks(step, the_device, warmup, frames, late):
+            records.append(BenchRecord(f"hyperbones@{resolution}", identity.name, identity.num_vertices,
+                                       the_device.type, batch, median, first))
     return records
 

@@ -148,10 +148,12 @@ class IdentityGeometry:
                    garment.uvs.to(device), garment.face_uvs.to(device))
 
 
-def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry, train_trunk: bool = True) -> Identity:
+def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry, train_trunk: bool = True,
+                  latents: torch.Tensor | None = None) -> Identity:
     """Module B on an identity's geometry -> the identity cache (differentiable when grad is
-    on; through the shared trunk too unless ``train_trunk`` is False)."""
-    code = model.encode(geometry.graph, train_trunk)
+    on; through the shared trunk too unless ``train_trunk`` is False). ``latents``: the
+    trunk's output on ``geometry.graph`` when already known (``HyperBonesModel.trunk_latents``)."""
+    code = model.encode(geometry.graph, train_trunk, latents)
     weights = torch.softmax(geometry.bones.log_weights + code.weight_corrections, dim=1)
     film = model.runtime.modulator(code.shape_code[None])[0]
     features_uv = geometry.raster.rasterize(code.vertex_features[None])[0]

@@ -30,7 +30,6 @@ if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
 
-WINDOW = 3  # frames t−2, t−1, t
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -99,7 +98,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
 
     Args:
         batch: the N characters' identities.
-        window: (N,3,B,3) world bone positions at t−2, t−1, t.
+        window: (N,K,B,3) world bone positions at t−K+1 … t (K: ``module_a.config.window_frames``).
         rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
         to_local: (N,4,4) world -> local frame of each character at t.
 
@@ -153,7 +152,7 @@ class Simulator:
         self.rest_joints = torch.stack([identity.rest_joint_positions.cpu() for identity in identities])  # (N,31,3)
         self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
         self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
-        self.window: torch.Tensor | None = None  # (N,3,B,3) world bone positions
+        self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
@@ -189,7 +188,7 @@ class Simulator:
         to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
         rotations, positions = rotations.to(self.device), positions.to(self.device)
         if self.window is None:
-            self.window = positions[:, None].expand(count, WINDOW, *positions.shape[1:]).clone()
+            self.window = positions[:, None].expand(count, self.module_a.config.window_frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
         return module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)

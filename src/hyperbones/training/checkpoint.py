@@ -1,8 +1,11 @@
 """Checkpoints: atomic writes, safe loads (``weights_only=True``), and the shipped teacher.
 
-A training checkpoint holds the model and optimiser states, the step and the config (as
-a plain dict); a resumed run re-seeds its episode sampler from the step, so it does not
-replay the episodes it has already seen. ``export_weights`` keeps what inference needs
+A training checkpoint holds the model state, the weights' moving average (only the entries
+that differ from the model's: a frozen part's average is its weights), the step and the
+config (as a plain dict); the optimiser's state sits beside it in ``optimizer.pt`` (older
+checkpoints hold it inside), so neither file outgrows the repository's file limit. A resumed
+run re-seeds its episode sampler from the step, so it does not replay the episodes it has
+already seen. ``export_weights`` keeps what inference needs
 (model state + config + a training summary) for committing.
 """
 
@@ -41,7 +44,41 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
         raise InputFileError(path, f"not a hyperbones checkpoint ({type(error).__name__}: {str(error).splitlines()[0]})") from None
     if not isinstance(payload, dict) or "model" not in payload or "config" not in payload:
         raise InputFileError(path, "not a hyperbones checkpoint (no model state or config)")
+    if payload.get("ema"):
+        payload["ema"] = {**payload["model"], **payload["ema"]}  # entries left out equal the model's
     return payload
+
+
+def optimizer_path(checkpoint: str | Path) -> Path:
+    """Where a training checkpoint's optimiser state is kept: ``optimizer.pt`` beside it."""
+    return Path(checkpoint).with_name("optimizer.pt")
+
+
+def save_training_state(path: str | Path, model: dict, ema: dict, optimizer: dict, step: int, config: dict) -> Path:
+    """Write a resumable training state: the optimiser's (``optimizer_path``) first, then the
+    checkpoint, each atomically; the moving average keeps only entries that differ from the model."""
+    path = Path(path)
+    save_checkpoint(optimizer_path(path), {"optimizer": optimizer, "step": step})
+    changed = {name: value for name, value in ema.items() if not torch.equal(value, model[name])}
+    return save_checkpoint(path, {"model": model, "ema": changed, "step": step, "config": config})
+
+
+def load_optimizer_state(path: str | Path, payload: dict, map_location: str | torch.device = "cpu") -> dict:
+    """The optimiser state for checkpoint ``path`` whose ``payload`` is loaded: inside it
+    (older checkpoints), else from ``optimizer_path``, which must be from the same step."""
+    if "optimizer" in payload:
+        return payload["optimizer"]
+    state_path = optimizer_path(path)
+    if not state_path.exists():
+        raise InputFileError(state_path, "missing: --resume needs the optimiser state saved beside the checkpoint")
+    try:
+        state = torch.load(state_path, map_location=map_location, weights_only=True)
+    except Exception as error:  # noqa: BLE001
+        raise InputFileError(state_path, f"not an optimiser state ({type(error).__name__})") from None
+    if not isinstance(state, dict) or state.get("step") != payload["step"]:
+        raise InputFileError(state_path, f"from step {state.get('step') if isinstance(state, dict) else '?'}, "
+                                         f"but the checkpoint is at step {payload['step']} (interrupted save?)")
+    return state["optimizer"]
 
 
 def export_weights(checkpoint: str | Path, out: str | Path) -> Path:

@@ -142,6 +142,10 @@ class JointConfig:
         148 cm² over the first 279 steps of a trial from the step-25000 teacher) is two
         orders of magnitude above C's physics terms (~1 J). B's heads learn from A's loss
         either way.
+    train_teacher: False freezes C and the shared trunk (the finished phase-1 teacher): a step
+        is then A's terms alone, on ``frames_per_step`` cached frames, and each cached
+        rollout's trunk latents are computed once. The CPU setting: C's own episode step
+        costs most of a joint step, and its weights no longer need to move.
     """
 
     cache_size: int = 16
@@ -155,6 +159,7 @@ class JointConfig:
     interpenetration_epsilon: float = 0.003
     physics_on_runtime: bool = True
     trunk_from_runtime: bool = False
+    train_teacher: bool = True
 
 
 @dataclass(frozen=True)

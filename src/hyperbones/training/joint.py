@@ -6,6 +6,8 @@ Every optimiser step sums
     (``training.rollouts``): Module B encodes the frame's identity (through the trunk C
     uses, so both losses train it), Module A predicts the garment from the bone window,
     and ``runtime_terms`` compares it with C's state there.
+With ``joint.train_teacher`` off, C and the trunk are frozen (a finished phase-1 teacher):
+a step is A's terms alone, and each rollout's trunk latents are computed once.
 The rollout cache is rebuilt from the current C when a run resumes (it is not saved).
 One process only (no DDP).
 """
@@ -41,7 +43,12 @@ class JointTrainer(TeacherTrainer):
                  progress: bool = True, max_steps: int | None = None):
         if int(os.environ.get("WORLD_SIZE", "1")) > 1:
             raise ParameterError("joint (HyperBones) training runs on one process; start it without torchrun")
+        if not config.joint.train_teacher and config.joint.trunk_from_runtime:
+            raise ParameterError("joint.trunk_from_runtime needs joint.train_teacher: a frozen trunk cannot learn from A")
         super().__init__(config, run_dir, resume=resume, progress=progress, max_steps=max_steps)
+        if not config.joint.train_teacher:
+            self.teacher.requires_grad_(False)  # Adam skips parameters without gradients
+            self.teacher.eval()  # its input statistics stay as phase 1 left them
         self.cache = RolloutCache(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
                                   self.device, config.data.settle_dt)
         self.runtime_proximity = BodyProximity(self.data.default_body.faces, device=self.device)
@@ -52,6 +59,16 @@ class JointTrainer(TeacherTrainer):
     @property
     def teacher(self) -> Teacher:
         return self.model.teacher
+
+    def shown_terms(self) -> dict[str, str]:
+        if self.config.joint.train_teacher:
+            return super().shown_terms()
+        return {"loss": "loss", "a_mse": "a_mse", "a_strain": "a_stretching"}
+
+    def _teacher_terms(self) -> tuple[dict[str, torch.Tensor], dict[str, float]]:
+        if self.config.joint.train_teacher:
+            return super()._teacher_terms()
+        return {}, {}
 
     def _extra_terms(self) -> dict[str, torch.Tensor]:
         joint = self.config.joint
@@ -74,8 +91,15 @@ class JointTrainer(TeacherTrainer):
         """Module B then A on one cached frame, against C's garment there."""
         rollout, t = self.cache.sample()
         device = self.device
-        identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime)
-        rotations, positions = identity.bones.pose(rollout.skinning[t - 2: t + 1].to(device))  # (3,B,3,3), (3,B,3)
+        if not self.config.joint.train_teacher and rollout.latents is None:
+            with torch.no_grad():
+                rollout.latents = self.model.trunk_latents(rollout.geometry.graph, train_trunk=False)
+        identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime,
+                                 latents=rollout.latents)
+        # A's window: frames t−K+1 … t; before the rollout's first frame it repeats that
+        # frame, as the runtime does when it starts.
+        frames = (torch.arange(t - self.config.runtime.window_frames + 1, t + 1)).clamp_min(0)
+        rotations, positions = identity.bones.pose(rollout.skinning[frames].to(device))  # (K,B,3,3), (K,B,3)
         to_local = heading_frame(rollout.joint_rotations[t, 0].to(device), rollout.root_translation[t].to(device))
         garment = module_a_frame(self.model.runtime, IdentityBatch.of([identity]), positions[None], rotations[-1:],
                                  positions[-1:], to_local[None])[0]

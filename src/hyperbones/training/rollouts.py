@@ -28,7 +28,7 @@ class TeacherRollout:
     geometry: its virtual bones, UV maps and canonical graph (what Module B reads).
     joint_rotations: (T,31,3,3); root_translation: (T,3); skinning: (T,31,4,4);
     body_vertices: (T,Vb,3); positions: (T,V,3) C's garment; edges: (E,2) the garment's
-    edges; step: when it was made.
+    edges; step: when it was made; latents: filled in by a trainer whose trunk is frozen.
     """
 
     physics: PhysicsIdentity
@@ -41,6 +41,7 @@ class TeacherRollout:
     edges: torch.Tensor
     motion: str
     step: int
+    latents: torch.Tensor | None = None  # (V,latent) a frozen trunk's output on geometry.graph, once computed
 
     @property
     def num_frames(self) -> int:

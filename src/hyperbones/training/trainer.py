@@ -32,7 +32,7 @@ from hyperbones.geometry.proximity import BodyProximity, push_outside
 from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
 from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
-from hyperbones.training.checkpoint import load_checkpoint, save_checkpoint
+from hyperbones.training.checkpoint import load_checkpoint, load_optimizer_state, save_training_state
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
 from hyperbones.training.loss import collision_weight_at, physics_terms
@@ -90,7 +90,7 @@ class TeacherTrainer:
             if type(config).from_dict(payload["config"], str(self.checkpoint_path)).as_dict() != config.as_dict():
                 raise ParameterError(f"{self.checkpoint_path}: --resume with a different config than the run's")
             self.model.load_state_dict(payload["model"])
-            self.optimizer.load_state_dict(payload["optimizer"])
+            self.optimizer.load_state_dict(load_optimizer_state(self.checkpoint_path, payload, self.device))
             self.step = int(payload["step"])
             self.ema = payload.get("ema")
             episode_seed += 7919 * self.step
@@ -165,6 +165,10 @@ class TeacherTrainer:
         logs.update(loss=float(loss.detach()), grad_norm=float(grad_norm), learning_rate=learning_rate)
         return logs
 
+    def shown_terms(self) -> dict[str, str]:
+        """The progress bar's label -> logged term."""
+        return {"loss": "loss", "strain": "stretching", "coll": "collision"}
+
     def _extra_terms(self) -> dict[str, torch.Tensor]:
         """Loss terms added to the teacher's in the same step (none here; the joint trainer's A terms)."""
         return {}
@@ -228,9 +232,10 @@ class TeacherTrainer:
 
     @torch.no_grad()
     def _update_average(self) -> None:
-        """The weights' moving average (``train.ema_decay``); buffers (input statistics) are copied."""
+        """The weights' moving average (``train.ema_decay``); buffers (input statistics) and
+        frozen parameters are copied."""
         decay = self.config.train.ema_decay
-        parameters = {name for name, _ in self.model.named_parameters()}
+        parameters = {name for name, value in self.model.named_parameters() if value.requires_grad}
         for name, value in self.model.state_dict().items():
             if name in parameters:
                 self.ema[name].mul_(decay).add_(value, alpha=1.0 - decay)
@@ -255,9 +260,8 @@ class TeacherTrainer:
                         self.writer.add_scalar(f"train/{key}", value, self.step)
                     rate = (self.step - first_step) / max(time.perf_counter() - started, 1e-9)
                     self.writer.add_scalar("train/steps_per_second", rate, self.step)
-                    shown = {key: running.get(key, math.nan) for key in ("loss", "stretching", "collision")}
-                    bar.set_postfix(loss=f"{shown['loss']:.3g}", strain=f"{shown['stretching']:.3g}",
-                                    coll=f"{shown['collision']:.2g}", refresh=False)
+                    bar.set_postfix({label: f"{running.get(key, math.nan):.3g}"
+                                     for label, key in self.shown_terms().items()}, refresh=False)
                 bar.update(1)
                 if self.step % self.config.train.checkpoint_every == 0 or self.step == total:
                     self.save()
@@ -270,10 +274,8 @@ class TeacherTrainer:
     def save(self) -> None:
         if not self.is_main:
             return
-        save_checkpoint(self.checkpoint_path, {
-            "model": self.model.state_dict(), "optimizer": self.optimizer.state_dict(), "step": self.step,
-            "config": self.config.as_dict(), "ema": self.ema,
-        })
+        save_training_state(self.checkpoint_path, self.model.state_dict(), self.ema, self.optimizer.state_dict(),
+                            self.step, self.config.as_dict())
 
     def close(self, finished: bool = True) -> None:
         """Flush the logs; after a ``finished`` run, leave the process group with the other
