@@ -353,9 +353,10 @@ def build_parser() -> argparse.ArgumentParser:
     simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
     simulate.add_argument("--method", default="lbs",
-                          help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet) "
-                               "hyperbones (the per-frame bone runtime) or physics (each frame's energy minimised "
-                               "by L-BFGS: slow, the teacher's reference)")
+                          help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet), "
+                               "hyperbones (the per-frame bone runtime, garment pushed out of the body each frame), "
+                               "hyperbones-raw (the same without that contact step) or physics (each frame's energy "
+                               "minimised by L-BFGS: slow, the teacher's reference)")
     simulate.add_argument("--checkpoint", default=None,
                           help="teacher or HyperBones checkpoint (default: the one shipped in the package)")
     simulate.add_argument("--device", default="auto", help="cpu, cuda or auto (CUDA when present; default)")
@@ -382,9 +383,12 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
                                 description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
     evaluation.add_argument("--methods", default="lbs",
-                            help="comma list of methods: lbs, teacher, hyperbones, physics (default: lbs); physics "
-                                 "minimises each frame's energy with L-BFGS, the teacher's slow reference")
-    evaluation.add_argument("--checkpoint", default=None, help="teacher checkpoint (default: the shipped one)")
+                            help="comma list of methods: lbs, teacher, hyperbones, hyperbones-raw (no contact "
+                                 "step), physics (default: lbs); physics minimises each frame's energy with L-BFGS, "
+                                 "the teacher's slow reference")
+    evaluation.add_argument("--checkpoint", default=None,
+                            help="teacher or HyperBones checkpoint (default: the shipped ones; a HyperBones one "
+                                 "holds its teacher too)")
     evaluation.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     evaluation.add_argument("--hold", type=float, default=0.0, help="seconds of stillness appended to each motion")
     evaluation.add_argument("--garments", default="tshirt,dress,long-skirt,pants", help="comma list of garments")
@@ -421,8 +425,8 @@ def build_parser() -> argparse.ArgumentParser:
                            description="Times each method frame by frame on the default body walking, after a warm-up "
                                        "(CUDA timings synchronised). Prints a table; --json writes records "
                                        "{method, garment, vertices, device, batch, ms_per_frame, from_frame}.")
-    bench.add_argument("--methods", default="lbs,teacher", help="comma list of lbs, teacher, hyperbones "
-                                                                "(default: lbs,teacher)")
+    bench.add_argument("--methods", default="lbs,teacher", help="comma list of lbs, teacher, hyperbones, "
+                                                                "hyperbones-raw (default: lbs,teacher)")
     bench.add_argument("--garments", default="tshirt,tshirt-open,pants,long-skirt,dress,tight-dress",
                        help="comma list of garments (default: the six templates)")
     bench.add_argument("--vertices", type=int, default=None, help="template resolution (default 5000)")

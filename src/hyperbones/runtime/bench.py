@@ -46,7 +46,7 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
     for garment_name in tqdm(garments, desc="bench", disable=not progress):
         garment, rest_vertices = draped_garment(garment_name, body, vertices=vertices)
         for method in methods:
-            extra = {"uv_resolution": uv_resolution} if method == "hyperbones" else {}
+            extra = {"uv_resolution": uv_resolution} if method.startswith("hyperbones") else {}
             solver = METHODS[method](garment, body, rest_vertices=rest_vertices, material=garment.material,
                                      checkpoint=checkpoint, device=str(the_device), **extra)
             stream = solver.frames(posed)

@@ -4,12 +4,13 @@ Per frame and character the cost is fixed: forward kinematics of 31 joints and t
 skinning blend (on the CPU for all characters at once: a few hundred numbers, which on a
 GPU would cost more in kernel launches than in work), one Bone-Net pass (batched over
 characters), one (V,B)@(B,12) garment skinning, two sparse products to and from the UV
-image and the Conv-MLP (batched). No state but the last three frames of bone positions, so
-it does not grow with the motion.
+image and the Conv-MLP (batched). No state but the last K frames of bone positions, so
+it does not grow with the motion. Given the posed bodies, ``step`` also pushes garment
+vertices that end up inside a body back out (``runtime.contact``).
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
-    for rotations, root in motion_frames:       # (31,3,3), (3,) per character
-        vertices = sim.step(rotations[None], root[None])[0]   # (V,3)
+    for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
+        vertices = sim.step(rotations[None], root[None], body_vertices[None])[0]   # (V,3)
 """
 
 from __future__ import annotations
@@ -134,7 +135,10 @@ class Simulator:
     The first frame fills the window (the characters start at rest).
     """
 
-    def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu"):
+    def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu",
+                 body_faces: torch.Tensor | None = None):
+        """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
+        them ``step`` can take the posed bodies and resolve contact."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")
         bones = {identity.bones.num_bones for identity in identities}
@@ -153,30 +157,42 @@ class Simulator:
         self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
         self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
+        self.contact = None
+        if body_faces is not None:
+            from hyperbones.runtime.contact import BodyContact
+
+            self.contact = BodyContact(body_faces, len(identities), self.device)
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
-             uv_resolution: int | None = None) -> "Simulator":
+             uv_resolution: int | None = None, contact: bool = True) -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
-        shipped one)."""
+        shipped one). ``contact``: ``step`` may then take the posed bodies (all characters
+        share Anny's topology)."""
         from hyperbones.runtime.identity import encode_identity
 
         model = hyperbones_from_checkpoint(checkpoint, device)
         with torch.no_grad():
             identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
                           for garment, body in characters]
-        return cls(model.runtime, identities, device)
+        return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None)
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
         self.window = None
 
     @torch.no_grad()
-    def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor) -> list[torch.Tensor]:
+    def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor,
+             body_vertices: torch.Tensor | None = None) -> list[torch.Tensor]:
         """One frame: (N,31,3,3) world joint rotations (relative to the A-pose), (N,3) Hips
-        positions -> N tensors (V_i,3) of world garment positions."""
+        positions -> N tensors (V_i,3) of world garment positions. ``body_vertices`` (N,Vb,3):
+        the posed bodies at this frame; garment vertices inside them are pushed out (needs
+        ``body_faces``)."""
         count = len(self.identities)
+        if body_vertices is not None and self.contact is None:
+            raise ParameterError("step got posed bodies, but the Simulator was made without body_faces "
+                                 "(Simulator.load(..., contact=True))")
         if joint_rotations.shape != (count, 31, 3, 3) or root_translation.shape != (count, 3):
             raise ParameterError(f"step expects ({count},31,3,3) rotations and ({count},3) roots, got "
                                  f"{tuple(joint_rotations.shape)} and {tuple(root_translation.shape)}")
@@ -191,4 +207,7 @@ class Simulator:
             self.window = positions[:, None].expand(count, self.module_a.config.window_frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        return module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
+        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
+        if body_vertices is not None:
+            garments = self.contact(garments, body_vertices.to(self.device))
+        return garments

@@ -17,16 +17,18 @@ from hyperbones.training.trainer import pick_device
 
 
 class HyperBonesMethod:
-    """Garment positions from the per-frame runtime: Module B once, then Module A per frame."""
-
-    name = "hyperbones"
+    """Garment positions from the per-frame runtime: Module B once, then Module A per frame,
+    with the garment pushed out of the body after each frame (``contact``; off: Module A's
+    output as it is, the method "hyperbones-raw")."""
 
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor | None = None,
                  material: Material | None = None, checkpoint: str | Path | None = None, device: str = "auto",
-                 progress: bool = False, uv_resolution: int | None = None):
+                 progress: bool = False, uv_resolution: int | None = None, contact: bool = True):
         self.device = pick_device(device)
+        self.name = "hyperbones" if contact else "hyperbones-raw"
         garment = replace(garment, material=material or garment.material)
-        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution)
+        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact)
+        self.contact = contact
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:
@@ -40,4 +42,5 @@ class HyperBonesMethod:
         self.simulator.reset()
         roots = posed.joint_positions[:, 0]
         for t in range(posed.joint_rotations.shape[0]):
-            yield self.simulator.step(posed.joint_rotations[t:t + 1], roots[t:t + 1])[0]
+            bodies = posed.vertices[t:t + 1] if self.contact else None
+            yield self.simulator.step(posed.joint_rotations[t:t + 1], roots[t:t + 1], bodies)[0]

@@ -39,13 +39,20 @@ def _hyperbones(*args, **kwargs):
     return HyperBonesMethod(*args, **kwargs)
 
 
+def _hyperbones_raw(*args, **kwargs):
+    from hyperbones.simulate.hyperbones import HyperBonesMethod
+
+    return HyperBonesMethod(*args, contact=False, **kwargs)
+
+
 def _physics(*args, **kwargs):
     from hyperbones.simulate.physics import PhysicsMethod
 
     return PhysicsMethod(*args, **kwargs)
 
 
-METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones, "physics": _physics}
+METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones, "hyperbones-raw": _hyperbones_raw,
+           "physics": _physics}
 """Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
 the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)
