@@ -8,6 +8,7 @@ from hyperbones.training.checkpoint import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig, JointConfig, TeacherTrainingConfig, load_config
 from hyperbones.training.joint import JointTrainer
 from hyperbones.training.loss import laplacian
+from hyperbones.training.rollouts import MAX_DRAWS, drift
 from hyperbones.training.trainer import TeacherTrainer
 
 from test_training_trainer import TINY
@@ -24,6 +25,15 @@ def test_laplacian_of_a_linear_field_vanishes_inside():
     values = xy @ torch.tensor([[2.0], [-1.0]])
     assert laplacian(values, edges)[4].abs().item() < 1e-6
     assert laplacian(values, edges)[0].abs().item() > 0.1  # a corner sees only one side
+
+
+def test_drift_measures_the_last_third():
+    skinned = torch.zeros(9, 4, 3)
+    positions = skinned.clone()
+    positions[6:, :, 2] = 0.05  # the garment rode 5 cm up over the last three frames
+    positions[:6, :, 0] = 1.0   # earlier frames do not count
+    rise, gap = drift(positions, skinned)
+    assert rise == pytest.approx(0.05) and gap == pytest.approx(0.05)
 
 
 def test_config_kinds(tmp_path):
@@ -102,7 +112,7 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
     phase_one.train()
     phase_one.close()
     values = {**TINY_JOINT, "runtime": {**TINY_JOINT["runtime"], "window_frames": 5},
-              "joint": {**TINY_JOINT["joint"], "train_teacher": False, "frames_per_step": 2},
+              "joint": {**TINY_JOINT["joint"], "train_teacher": False, "frames_per_step": 2, "max_gap": 1e-6},
               "train": {**TINY["train"], "init_from": str(teacher_run / "checkpoint.pt")}}
     with pytest.raises(ParameterError, match="trunk_from_runtime needs joint.train_teacher"):
         JointTrainer(HyperBonesTrainingConfig.from_dict(
@@ -115,6 +125,8 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
     assert all(torch.equal(v, trainer.teacher.state_dict()[k]) for k, v in teacher_before.items())
     assert any(not torch.equal(a, b) for a, b in zip(runtime_before, trainer.model.runtime.parameters()))
     assert any(r.latents is not None for r in trainer.cache.rollouts)
+    # No rollout stays within a micrometre of its skinned pose: each refresh drew MAX_DRAWS and kept the last.
+    assert trainer.cache.refused == (MAX_DRAWS - 1) * len(trainer.cache.rollouts)
     trainer.step += 1
     assert trainer.train() == 2
     trainer.close()

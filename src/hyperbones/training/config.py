@@ -142,6 +142,11 @@ class JointConfig:
         148 cm² over the first 279 steps of a trial from the step-25000 teacher) is two
         orders of magnitude above C's physics terms (~1 J). B's heads learn from A's loss
         either way.
+    max_rise / max_gap: a rollout whose garment, over the last third of its frames, sits on
+        average more than ``max_rise`` (m) above its skinned pose, or more than ``max_gap``
+        (m, RMS over vertices) away from it, is not kept as a target (``training.rollouts``):
+        the teacher lets some garments creep up the body or slide off it, and A would learn
+        that as the garment's place. 0 turns a check off.
     train_teacher: False freezes C and the shared trunk (the finished phase-1 teacher): a step
         is then A's terms alone, on ``frames_per_step`` cached frames, and each cached
         rollout's trunk latents are computed once. The CPU setting: C's own episode step
@@ -160,6 +165,8 @@ class JointConfig:
     physics_on_runtime: bool = True
     trunk_from_runtime: bool = False
     train_teacher: bool = True
+    max_rise: float = 0.0
+    max_gap: float = 0.0
 
 
 @dataclass(frozen=True)

@@ -66,9 +66,9 @@ class JointTrainer(TeacherTrainer):
         return {"loss": "loss", "a_mse": "a_mse", "a_strain": "a_stretching"}
 
     def _teacher_terms(self) -> tuple[dict[str, torch.Tensor], dict[str, float]]:
-        if self.config.joint.train_teacher:
-            return super()._teacher_terms()
-        return {}, {}
+        terms, logs = super()._teacher_terms() if self.config.joint.train_teacher else ({}, {})
+        logs["refused_rollouts"] = float(self.cache.refused)
+        return terms, logs
 
     def _extra_terms(self) -> dict[str, torch.Tensor]:
         joint = self.config.joint

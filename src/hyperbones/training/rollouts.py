@@ -4,6 +4,12 @@ Each rollout is C run without gradient from the LBS start (after its settling st
 training clip on a random identity, as ``hyperbones simulate --method teacher`` runs it, so
 A learns C's lag, swing and settling along a whole motion, not only a few steps from an LBS
 pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the current C.
+
+A rollout is kept only if, over its last third, the garment stays near its skinned pose
+(``drift``: its mean height above it within ``max_rise``, its RMS distance within
+``max_gap``); the teacher lets some garments creep up the body or slide off, and such a
+rollout would teach A a wrong place for the garment. A refused one is replaced by a new
+draw (up to ``MAX_DRAWS`` in all).
 """
 
 from __future__ import annotations
@@ -48,6 +54,18 @@ class TeacherRollout:
         return self.positions.shape[0]
 
 
+MAX_DRAWS = 5  # rollouts drawn per refresh before the last one is kept whatever its drift
+
+
+def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]:
+    """(T,V,3) C's garment and (T,V,3) the same garment skinned -> over the last third of
+    the frames, the mean height of C's garment above the skinned one (m) and the mean RMS
+    distance between them (m)."""
+    tail = slice(positions.shape[0] - max(1, positions.shape[0] // 3), None)
+    offset = positions[tail] - skinned[tail]
+    return float(offset[..., 2].mean()), float(offset.square().sum(-1).mean(-1).sqrt().mean())
+
+
 class RolloutCache:
     """Up to ``config.cache_size`` teacher rollouts; ``sample`` draws a (rollout, frame) pair."""
 
@@ -57,9 +75,23 @@ class RolloutCache:
         self.num_bones, self.uv_resolution = num_bones, uv_resolution
         self.device, self.settle_dt = device, settle_dt
         self.rollouts: list[TeacherRollout] = []
+        self.refused = 0  # rollouts not kept for their drift
 
     def make(self, teacher: Teacher, step: int) -> TeacherRollout:
-        """One new rollout of ``teacher`` (put in eval mode for it: its input statistics stay as they are)."""
+        """A new rollout of ``teacher`` that passes the drift check (the last of ``MAX_DRAWS`` otherwise)."""
+        for _ in range(MAX_DRAWS - 1):
+            rollout, rise, gap = self._draw(teacher, step)
+            if self.config.max_rise > 0 and rise > self.config.max_rise:
+                self.refused += 1
+            elif self.config.max_gap > 0 and gap > self.config.max_gap:
+                self.refused += 1
+            else:
+                return rollout
+        return self._draw(teacher, step)[0]
+
+    def _draw(self, teacher: Teacher, step: int) -> tuple[TeacherRollout, float, float]:
+        """One rollout of ``teacher`` (put in eval mode for it: its input statistics stay as
+        they are) and its ``drift``."""
         data = self.data
         identity = data.sample_identity()
         at_end = data.random.random() < self.config.end_fraction
@@ -76,8 +108,9 @@ class RolloutCache:
             teacher.train(was_training)
         geometry = IdentityGeometry.build(garment, identity.body, self.num_bones, self.uv_resolution, self.device,
                                           name=identity.name)
-        return TeacherRollout(identity, geometry, window.joint_rotations, root, posed.skinning_transforms,
-                              posed.vertices, positions, garment.edges(), window.name, step)
+        rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
+        return (TeacherRollout(identity, geometry, window.joint_rotations, root, posed.skinning_transforms,
+                               posed.vertices, positions, garment.edges(), window.name, step), rise, gap)
 
     def refresh(self, teacher: Teacher, step: int) -> TeacherRollout:
         """Add a rollout, dropping the oldest when the cache is full."""
