@@ -135,3 +135,41 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
     raw = torch.load(tmp_path / "joint" / "checkpoint.pt", weights_only=True)
     assert raw["ema"] and not any(k.startswith("teacher.") for k in raw["ema"])
 
+
+def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, capsys):
+    """hyperbones rollouts fills a bank; the same seed goes on with new draws; phase 2 loads from it."""
+    from hyperbones.cli import main
+    from hyperbones.training.rollouts import bank_files, generate_bank, load_rollout
+
+    teacher_run = tmp_path / "teacher"
+    phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=1)
+    phase_one.train()
+    phase_one.close()
+    bank = tmp_path / "bank"
+    values = {**TINY_JOINT, "joint": {**TINY_JOINT["joint"], "train_teacher": False, "bank": str(bank)},
+              "train": {**TINY["train"], "init_from": str(teacher_run / "checkpoint.pt")}}
+    config = HyperBonesTrainingConfig.from_dict(values)
+    generate_bank(config, bank, count=2, seed=3, progress=False)
+    generate_bank(config, bank, count=1, seed=3, progress=False)
+    files = bank_files(bank)
+    assert [f.name for f in files] == ["rollout-s3-00000.pt", "rollout-s3-00001.pt", "rollout-s3-00002.pt"]
+    records = [load_rollout(f) for f in files]
+    assert records[0]["positions"].dtype == torch.float16 and records[0]["version"] == 1
+    assert len({(r["shape"]["weight"], r["motion"]) for r in records}) == 3  # three different draws
+
+    trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=1)
+    rollout = trainer.cache.load(files[0])
+    assert torch.allclose(rollout.positions, records[0]["positions"].float())
+    assert rollout.body_vertices.shape[0] == rollout.num_frames == records[0]["positions"].shape[0]
+    assert trainer.train() == 1
+    trainer.close()
+    assert len(trainer.cache.rollouts) == 2 and all(r.source for r in trainer.cache.rollouts)  # loaded, not simulated
+
+    with pytest.raises(InputFileError, match="not a saved rollout"):
+        torch.save({"something": 1}, tmp_path / "bad.pt")
+        load_rollout(tmp_path / "bad.pt")
+    teacher_config = tmp_path / "teacher.toml"
+    teacher_config.write_text("[model]\nlatent = 16\n")
+    assert main(["rollouts", "--config", str(teacher_config), "--out", str(bank)]) == 2
+    assert "not a HyperBones (phase 2) config" in capsys.readouterr().err
+

@@ -9,7 +9,7 @@ import time
 import warnings
 from pathlib import Path
 
-from hyperbones.errors import HyperbonesError, ParameterError
+from hyperbones.errors import HyperbonesError, InputFileError, ParameterError
 
 BODY_HELP = ("body shape as phenotype values in [0,1]: gender, age, muscle, weight, height, proportions, "
              "e.g. 'gender=0.2,weight=0.8' (default: all 0.5)")
@@ -239,6 +239,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def cmd_rollouts(args) -> int:
+    from hyperbones.training.config import HyperBonesTrainingConfig, load_config
+    from hyperbones.training.rollouts import generate_bank
+
+    config = load_config(args.config)
+    if not isinstance(config, HyperBonesTrainingConfig):
+        raise InputFileError(args.config, "not a HyperBones (phase 2) config: it has no [joint] table")
+    out = args.out or config.joint.bank
+    if not out:
+        raise ParameterError("no --out, and the config's joint.bank is empty")
+    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet)
+    return 0
+
+
 def cmd_check_hem(args) -> int:
     from hyperbones.simulate.hem import hem_curves, hem_table, plot_hem
 
@@ -444,6 +458,18 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
     bench.set_defaults(func=cmd_bench)
+
+    rollouts = sub.add_parser("rollouts", help="simulate teacher rollouts into a bank for phase 2 (joint.bank)",
+                              description="Rolls the config's teacher (train.init_from) out over random training "
+                                          "identities and clip windows, as phase 2's cache does, and saves each "
+                                          "rollout (~1 MB) to the bank folder. Several processes with different "
+                                          "--seed values can fill one bank; the same seed goes on where it stopped.")
+    rollouts.add_argument("--config", required=True, help="HyperBones (phase 2) TOML config")
+    rollouts.add_argument("--out", default=None, help="bank folder (default: the config's joint.bank)")
+    rollouts.add_argument("--count", type=int, default=100, help="rollouts to add (default 100)")
+    rollouts.add_argument("--seed", type=int, default=0, help="draw seed; one per process sharing a bank (default 0)")
+    rollouts.add_argument("--quiet", action="store_true", help="no progress bar")
+    rollouts.set_defaults(func=cmd_rollouts)
 
     identity = sub.add_parser("identity", help="encode a body x garment once (Module B) and save the identity cache",
                               description="Drapes the garment on the body, runs Module B and writes the cache the "

@@ -147,6 +147,8 @@ class JointConfig:
         (m, RMS over vertices) away from it, is not kept as a target (``training.rollouts``):
         the teacher lets some garments creep up the body or slide off it, and A would learn
         that as the garment's place. 0 turns a check off.
+    bank: a folder of saved rollouts (``hyperbones rollouts``); refreshes load from it
+        (rollouts not already cached) and simulate only when it has none left. Empty: none.
     train_teacher: False freezes C and the shared trunk (the finished phase-1 teacher): a step
         is then A's terms alone, on ``frames_per_step`` cached frames, and each cached
         rollout's trunk latents are computed once. The CPU setting: C's own episode step
@@ -167,6 +169,7 @@ class JointConfig:
     train_teacher: bool = True
     max_rise: float = 0.0
     max_gap: float = 0.0
+    bank: str = ""
 
 
 @dataclass(frozen=True)

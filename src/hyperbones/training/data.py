@@ -20,7 +20,7 @@ import torch
 
 from hyperbones.body.anny_body import Body, body_for
 from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
-from hyperbones.errors import InputFileError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
 from hyperbones.geometry.lbs import linear_blend_skinning
@@ -119,6 +119,7 @@ class Identity:
     skin_weights: torch.Tensor
     limiter: StrainLimiter
     garment: Garment | None = None  # the garment carried to this body (UVs, pins, fabric), when known
+    resolution: int | None = None  # the template resolution it was made from, when sampled by TeacherData
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
@@ -216,13 +217,21 @@ class TeacherData:
 
     def sample_identity(self) -> Identity:
         name, vertices = self.random.choice(sorted(self.sources))
+        return self.identity_for(name, vertices, self.sample_shape(), self.sample_material())
+
+    def identity_for(self, name: str, vertices: int, shape: BodyShape, material: Material) -> Identity:
+        """Template ``name`` at resolution ``vertices`` (one of the config's) carried to the
+        body of ``shape``, in ``material``."""
+        if (name, vertices) not in self.sources:
+            raise ParameterError(f"no training garment {name!r} at {vertices} vertices in this config")
         source = self.sources[(name, vertices)]
-        body = Body(self.sample_shape())
+        body = Body(shape)
         rest_vertices = source.follower.place(body)
-        material = self.sample_material()
-        return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                              source.skin_weights, material,
-                              replace(source.garment.with_vertices(rest_vertices), material=material))
+        identity = Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
+                                  source.skin_weights, material,
+                                  replace(source.garment.with_vertices(rest_vertices), material=material))
+        identity.resolution = vertices
+        return identity
 
     def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
         """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),

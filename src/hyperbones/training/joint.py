@@ -75,7 +75,8 @@ class JointTrainer(TeacherTrainer):
         if not self.cache.rollouts:
             if self.progress:
                 print("preparing teacher rollouts for Module A", flush=True)
-            for _ in range(min(INITIAL_ROLLOUTS, joint.cache_size)):
+            # Loaded from a bank they are cheap: fill the whole cache at once.
+            for _ in range(joint.cache_size if joint.bank else min(INITIAL_ROLLOUTS, joint.cache_size)):
                 self.cache.refresh(self.teacher, self.step)
         elif self.step % joint.refresh_every == 0:
             self.cache.refresh(self.teacher, self.step)  # grows until full, then replaces the oldest

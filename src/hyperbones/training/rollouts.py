@@ -15,9 +15,14 @@ draw (up to ``MAX_DRAWS`` in all).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import torch
 
+from hyperbones.body.shape import BodyShape
+from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.io_utils import atomic_path
+from hyperbones.physics.material import Material
 from hyperbones.models.teacher import Teacher
 from hyperbones.runtime.identity import IdentityGeometry
 from hyperbones.simulate.teacher import TeacherMethod
@@ -48,6 +53,7 @@ class TeacherRollout:
     motion: str
     step: int
     latents: torch.Tensor | None = None  # (V,latent) a frozen trunk's output on geometry.graph, once computed
+    source: str = ""  # the bank file it was loaded from
 
     @property
     def num_frames(self) -> int:
@@ -67,7 +73,12 @@ def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]
 
 
 class RolloutCache:
-    """Up to ``config.cache_size`` teacher rollouts; ``sample`` draws a (rollout, frame) pair."""
+    """Up to ``config.cache_size`` teacher rollouts; ``sample`` draws a (rollout, frame) pair.
+
+    With ``config.bank`` (a folder of rollouts saved by ``hyperbones rollouts``), a refresh
+    loads a saved rollout instead of simulating one, so the rollouts A learns from can be
+    made beforehand, by other processes, and kept across runs.
+    """
 
     def __init__(self, data: TeacherData, config: JointConfig, num_bones: int, uv_resolution: int,
                  device: torch.device, settle_dt: float):
@@ -77,19 +88,24 @@ class RolloutCache:
         self.rollouts: list[TeacherRollout] = []
         self.refused = 0  # rollouts not kept for their drift
 
+    def simulate(self, teacher: Teacher) -> tuple[PhysicsIdentity, str, torch.Tensor, torch.Tensor, torch.Tensor]:
+        """C over a random clip window on a random identity, redrawn (up to ``MAX_DRAWS``) while
+        its ``drift`` fails the config's checks: (identity, clip name, joint rotations (T,31,3,3),
+        root path (T,3), C's garment (T,V,3))."""
+        for attempt in range(MAX_DRAWS):
+            identity, name, rotations, root, positions, rise, gap = self._draw(teacher)
+            too_high = self.config.max_rise > 0 and rise > self.config.max_rise
+            too_far = self.config.max_gap > 0 and gap > self.config.max_gap
+            if not (too_high or too_far) or attempt == MAX_DRAWS - 1:
+                return identity, name, rotations, root, positions
+            self.refused += 1
+        raise AssertionError("unreachable")
+
     def make(self, teacher: Teacher, step: int) -> TeacherRollout:
         """A new rollout of ``teacher`` that passes the drift check (the last of ``MAX_DRAWS`` otherwise)."""
-        for _ in range(MAX_DRAWS - 1):
-            rollout, rise, gap = self._draw(teacher, step)
-            if self.config.max_rise > 0 and rise > self.config.max_rise:
-                self.refused += 1
-            elif self.config.max_gap > 0 and gap > self.config.max_gap:
-                self.refused += 1
-            else:
-                return rollout
-        return self._draw(teacher, step)[0]
+        return self.assemble(*self.simulate(teacher), step=step)
 
-    def _draw(self, teacher: Teacher, step: int) -> tuple[TeacherRollout, float, float]:
+    def _draw(self, teacher: Teacher):
         """One rollout of ``teacher`` (put in eval mode for it: its input statistics stay as
         they are) and its ``drift``."""
         data = self.data
@@ -106,15 +122,43 @@ class RolloutCache:
             positions = method.run(posed)
         finally:
             teacher.train(was_training)
+        rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
+        return identity, window.name, window.joint_rotations, root, positions, rise, gap
+
+    def assemble(self, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor, root: torch.Tensor,
+                 positions: torch.Tensor, step: int = 0) -> TeacherRollout:
+        """A cache entry: the posed body and the identity's geometry (bones, UV maps, graph) added."""
+        posed = identity.body.pose(joint_rotations, root)
+        garment = identity.garment
         geometry = IdentityGeometry.build(garment, identity.body, self.num_bones, self.uv_resolution, self.device,
                                           name=identity.name)
-        rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
-        return (TeacherRollout(identity, geometry, window.joint_rotations, root, posed.skinning_transforms,
-                               posed.vertices, positions, garment.edges(), window.name, step), rise, gap)
+        return TeacherRollout(identity, geometry, joint_rotations, root, posed.skinning_transforms, posed.vertices,
+                              positions.float(), garment.edges(), motion, step)
+
+    def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
+        """A rollout saved by ``save_rollout``, rebuilt on this config's garments."""
+        record = load_rollout(path)
+        identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
+                                          Material(**record["material"]))
+        if identity.rest.rest_vertices.shape[0] != record["positions"].shape[1]:
+            raise InputFileError(path, f"{record['positions'].shape[1]} garment vertices, but {record['template']} at "
+                                       f"{record['resolution']} has {identity.rest.rest_vertices.shape[0]} here")
+        return self.assemble(identity, record["motion"], record["joint_rotations"], record["root_translation"],
+                             record["positions"], step)
 
     def refresh(self, teacher: Teacher, step: int) -> TeacherRollout:
-        """Add a rollout, dropping the oldest when the cache is full."""
-        rollout = self.make(teacher, step)
+        """Add a rollout (from the bank when the config names one and it holds a rollout not
+        in the cache, else a new one), dropping the oldest when the cache is full."""
+        rollout = None
+        if self.config.bank:
+            cached = {r.source for r in self.rollouts}
+            unused = [path for path in bank_files(self.config.bank) if str(path) not in cached]
+            if unused:
+                path = self.data.random.choice(unused)
+                rollout = self.load(path, step)
+                rollout.source = str(path)
+        if rollout is None:
+            rollout = self.make(teacher, step)
         if len(self.rollouts) >= self.config.cache_size:
             oldest = min(range(len(self.rollouts)), key=lambda i: self.rollouts[i].step)
             self.rollouts.pop(oldest)
@@ -125,3 +169,73 @@ class RolloutCache:
         """A cached rollout and a frame t >= 2 of it (A's window needs t−2 and t−1)."""
         rollout = self.data.random.choice(self.rollouts)
         return rollout, self.data.random.randrange(2, rollout.num_frames)
+
+
+BANK_VERSION = 1
+
+
+def bank_files(folder: str | Path) -> list[Path]:
+    """The saved rollouts in a bank folder (sorted; none when it does not exist yet)."""
+    return sorted(Path(folder).glob("rollout-*.pt"))
+
+
+def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor,
+                 root: torch.Tensor, positions: torch.Tensor) -> Path:
+    """Write one rollout compactly (atomically): what rebuilds its identity (template,
+    resolution, body shape, fabric), the clip window and C's garment in half precision
+    (T,V,3): ~1 MB for 150 frames of 1500 vertices. The body is posed again on loading."""
+    if identity.resolution is None:
+        raise ParameterError("only an identity sampled by TeacherData (with its template resolution) can be saved")
+    path = Path(path)
+    with atomic_path(path) as tmp:
+        torch.save({"version": BANK_VERSION, "template": identity.name, "resolution": identity.resolution,
+                    "shape": identity.body.shape.as_dict(), "material": identity.garment.material.as_dict(),
+                    "motion": motion, "joint_rotations": joint_rotations.float(),
+                    "root_translation": root.float(), "positions": positions.half()}, tmp)
+    return path
+
+
+def load_rollout(path: str | Path) -> dict:
+    path = Path(path)
+    if not path.exists():
+        raise InputFileError(path, "rollout file not found")
+    try:
+        record = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
+        raise InputFileError(path, f"not a saved rollout ({type(error).__name__})") from None
+    if not isinstance(record, dict) or record.get("version") != BANK_VERSION:
+        raise InputFileError(path, f"not a saved rollout of version {BANK_VERSION}")
+    return record
+
+
+
+def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progress: bool = True) -> list[Path]:
+    """Simulate ``count`` drift-checked rollouts of the config's teacher (``train.init_from``)
+    into ``folder`` as ``rollout-s<seed>-<index>.pt``. Run again with the same seed, it
+    goes on after the files already there (with fresh draws), so several processes with
+    different seeds, or one process over several sessions, fill one bank."""
+    from tqdm import tqdm
+
+    from hyperbones.training.trainer import teacher_from_checkpoint
+
+    if count < 1:
+        raise ParameterError("--count must be at least 1")
+    if not config.train.init_from:
+        raise ParameterError("the config names no teacher to roll out (train.init_from)")
+    folder = Path(folder)
+    first = len(list(folder.glob(f"rollout-s{seed}-*.pt"))) if folder.exists() else 0
+    teacher, _ = teacher_from_checkpoint(config.train.init_from)
+    data = TeacherData(config.data, seed=seed * 1_000_003 + first,
+                       progress=(lambda text: print(f"preparing {text}", flush=True)) if progress else None)
+    cache = RolloutCache(data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
+                         torch.device("cpu"), config.data.settle_dt)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = []
+    with torch.no_grad():
+        for index in tqdm(range(first, first + count), desc="rollouts", disable=not progress, unit="rollout"):
+            identity, motion, rotations, root, positions = cache.simulate(teacher)
+            written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", identity, motion, rotations, root,
+                                        positions))
+    if progress:
+        print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} redrawn for drift)")
+    return written
