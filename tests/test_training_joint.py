@@ -165,7 +165,7 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     trainer.close()
     assert len(trainer.cache.rollouts) == 2 and all(r.source for r in trainer.cache.rollouts)  # loaded, not simulated
 
-    with pytest.raises(InputFileError, match="not a saved rollout"):
+    with pytest.raises(InputFileError, match="bad.pt: not a version-1 hyperbones saved rollout"):
         torch.save({"something": 1}, tmp_path / "bad.pt")
         load_rollout(tmp_path / "bad.pt")
     teacher_config = tmp_path / "teacher.toml"

@@ -17,9 +17,8 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from hyperbones.errors import InputFileError
 from hyperbones.geometry.uv_raster import UvRaster
-from hyperbones.io_utils import atomic_path
+from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.rig.virtual_bones import VirtualBones
 
 if TYPE_CHECKING:
@@ -93,15 +92,7 @@ class Identity:
 
     @classmethod
     def load(cls, path: str | Path, device: torch.device | str = "cpu") -> "Identity":
-        path = Path(path)
-        if not path.exists():
-            raise InputFileError(path, "identity cache not found")
-        try:
-            payload = torch.load(path, map_location="cpu", weights_only=True)
-        except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
-            raise InputFileError(path, f"not a hyperbones identity cache ({type(error).__name__})") from None
-        if not isinstance(payload, dict) or payload.get("version") != IDENTITY_VERSION:
-            raise InputFileError(path, f"not a version-{IDENTITY_VERSION} hyperbones identity cache")
+        payload = load_versioned(path, "identity cache", IDENTITY_VERSION)
         return cls(payload["name"], payload["rest_vertices"], payload["faces"], payload["rest_joint_positions"],
                    VirtualBones(**payload["bones"]), payload["weights"], payload["film"], payload["features_uv"],
                    UvRaster.from_state_dict(payload["raster"]), payload["vertex_features"], payload["uvs"],

@@ -21,7 +21,7 @@ import torch
 
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError, ParameterError
-from hyperbones.io_utils import atomic_path
+from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.physics.material import Material
 from hyperbones.models.teacher import Teacher
 from hyperbones.runtime.identity import IdentityGeometry
@@ -196,17 +196,8 @@ def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint
 
 
 def load_rollout(path: str | Path) -> dict:
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(path, "rollout file not found")
-    try:
-        record = torch.load(path, map_location="cpu", weights_only=True)
-    except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
-        raise InputFileError(path, f"not a saved rollout ({type(error).__name__})") from None
-    if not isinstance(record, dict) or record.get("version") != BANK_VERSION:
-        raise InputFileError(path, f"not a saved rollout of version {BANK_VERSION}")
-    return record
-
+    """A rollout written by ``save_rollout`` (its fields as saved)."""
+    return load_versioned(path, "saved rollout", BANK_VERSION)
 
 
 def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progress: bool = True) -> list[Path]:
