@@ -3,8 +3,8 @@
 Every method runs on the default body over a built-in walk; the first ``warmup`` frames
 are not timed (caches, allocator, JIT), then each frame is timed on its own (CUDA work is
 synchronised before the clock is read) and the median is reported; ``late`` adds a second
-timed block that far into the motion, to show that the cost does not grow with it. Posing the body is
-not part of a method's frame: it is shared by all methods and done beforehand.
+timed block that far into the motion, to show that the cost does not grow with it. Posing
+the body is not part of a method's frame: it is shared by all methods and done beforehand.
 """
 
 from __future__ import annotations

@@ -204,7 +204,8 @@ class Simulator:
         to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
         rotations, positions = rotations.to(self.device), positions.to(self.device)
         if self.window is None:
-            self.window = positions[:, None].expand(count, self.module_a.config.window_frames, *positions.shape[1:]).clone()
+            frames = self.module_a.config.window_frames
+            self.window = positions[:, None].expand(count, frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
         garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)

@@ -36,7 +36,8 @@ def timed_blocks(step: Callable[[int], None], device: torch.device, warmup: int,
     ``late`` on (frames between the two blocks run untimed). Returns [(first frame, median)]."""
     starts = [warmup] if late is None else [warmup, late]
     if late is not None and late < warmup + frames:
-        raise ParameterError(f"--late {late} must come after the first timed block (frames {warmup}–{warmup + frames - 1})")
+        raise ParameterError(f"--late {late} must come after the first timed block "
+                             f"(frames {warmup}–{warmup + frames - 1})")
     blocks = []
     t = 0
     for first in starts:

@@ -44,7 +44,8 @@ class JointTrainer(TeacherTrainer):
         if int(os.environ.get("WORLD_SIZE", "1")) > 1:
             raise ParameterError("joint (HyperBones) training runs on one process; start it without torchrun")
         if not config.joint.train_teacher and config.joint.trunk_from_runtime:
-            raise ParameterError("joint.trunk_from_runtime needs joint.train_teacher: a frozen trunk cannot learn from A")
+            raise ParameterError("joint.trunk_from_runtime needs joint.train_teacher: "
+                                 "a frozen trunk cannot learn from A")
         super().__init__(config, run_dir, resume=resume, progress=progress, max_steps=max_steps)
         if not config.joint.train_teacher:
             self.teacher.requires_grad_(False)  # Adam skips parameters without gradients

@@ -3,7 +3,8 @@
 Each rollout is C run without gradient from the LBS start (after its settling step) over a
 training clip on a random identity, as ``hyperbones simulate --method teacher`` runs it, so
 A learns C's lag, swing and settling along a whole motion, not only a few steps from an LBS
-pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the current C.
+pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the current C
+(or, with a bank, by a saved one: ``RolloutCache``).
 
 A rollout is kept only if, over its last third, the garment stays near its skinned pose
 (``drift``: its mean height above it within ``max_rise``, its RMS distance within
@@ -22,8 +23,8 @@ import torch
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.io_utils import atomic_path, load_versioned
-from hyperbones.physics.material import Material
 from hyperbones.models.teacher import Teacher
+from hyperbones.physics.material import Material
 from hyperbones.runtime.identity import IdentityGeometry
 from hyperbones.simulate.teacher import TeacherMethod
 from hyperbones.training.config import JointConfig
@@ -166,7 +167,7 @@ class RolloutCache:
         return rollout
 
     def sample(self) -> tuple[TeacherRollout, int]:
-        """A cached rollout and a frame t >= 2 of it (A's window needs t−2 and t−1)."""
+        """A cached rollout and a frame t >= 2 of it (A's window repeats frame 0 before the start)."""
         rollout = self.data.random.choice(self.rollouts)
         return rollout, self.data.random.randrange(2, rollout.num_frames)
 
@@ -183,7 +184,7 @@ def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint
                  root: torch.Tensor, positions: torch.Tensor) -> Path:
     """Write one rollout compactly (atomically): what rebuilds its identity (template,
     resolution, body shape, fabric), the clip window and C's garment in half precision
-    (T,V,3): ~1 MB for 150 frames of 1500 vertices. The body is posed again on loading."""
+    (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed again on loading."""
     if identity.resolution is None:
         raise ParameterError("only an identity sampled by TeacherData (with its template resolution) can be saved")
     path = Path(path)
