@@ -64,11 +64,13 @@ class ModuleAConfig:
 
     def __post_init__(self):
         if self.window_frames < 2:
-            raise ParameterError(f"runtime.window_frames must be at least 2 (a position and a velocity), got {self.window_frames}")
+            raise ParameterError(f"runtime.window_frames must be at least 2 (a position and a velocity), "
+                                 f"got {self.window_frames}")
 
     @property
     def window_features(self) -> int:
-        """Bone-Net's input width: 3 numbers per bone for the position at t and each of the K−1 displacements."""
+        """Bone-Net's input width: 3 numbers per bone for its position at t and for each of
+        its K−1 displacements."""
         return 3 * self.window_frames * self.num_bones
 
     @classmethod
