@@ -28,7 +28,6 @@ class HyperBonesMethod:
         self.name = "hyperbones" if contact else "hyperbones-raw"
         garment = replace(garment, material=material or garment.material)
         self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact)
-        self.contact = contact
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:
@@ -42,5 +41,5 @@ class HyperBonesMethod:
         self.simulator.reset()
         roots = posed.joint_positions[:, 0]
         for t in range(posed.joint_rotations.shape[0]):
-            bodies = posed.vertices[t:t + 1] if self.contact else None
+            bodies = posed.vertices[t:t + 1] if self.simulator.contact is not None else None
             yield self.simulator.step(posed.joint_rotations[t:t + 1], roots[t:t + 1], bodies)[0]

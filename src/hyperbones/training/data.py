@@ -123,11 +123,12 @@ class Identity:
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
-              skin_weights: torch.Tensor, material: Material, garment: Garment | None = None) -> "Identity":
+              skin_weights: torch.Tensor, material: Material, garment: Garment | None = None,
+              resolution: int | None = None) -> "Identity":
         rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
         topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
         return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask),
-                   garment)
+                   garment, resolution)
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
         """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
@@ -227,11 +228,9 @@ class TeacherData:
         source = self.sources[(name, vertices)]
         body = Body(shape)
         rest_vertices = source.follower.place(body)
-        identity = Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                                  source.skin_weights, material,
-                                  replace(source.garment.with_vertices(rest_vertices), material=material))
-        identity.resolution = vertices
-        return identity
+        return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
+                              source.skin_weights, material,
+                              replace(source.garment.with_vertices(rest_vertices), material=material), vertices)
 
     def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
         """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import torch
 
+from hyperbones.body.anny_body import PosedBody
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.io_utils import atomic_path, load_versioned
@@ -64,6 +65,22 @@ class TeacherRollout:
 MAX_DRAWS = 5  # rollouts drawn per refresh before the last one is kept whatever its drift
 
 
+@dataclass
+class SimulatedRollout:
+    """A teacher rollout before it enters the cache: the identity, the clip window's name,
+    joint rotations (T,31,3,3) and root path (T,3), the body posed along them, C's garment
+    (T,V,3), and its ``drift`` (rise, gap in m)."""
+
+    identity: PhysicsIdentity
+    motion: str
+    joint_rotations: torch.Tensor
+    root: torch.Tensor
+    posed: PosedBody
+    positions: torch.Tensor
+    rise: float
+    gap: float
+
+
 def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]:
     """(T,V,3) C's garment and (T,V,3) the same garment skinned -> over the last third of
     the frames, the mean height of C's garment above the skinned one (m) and the mean RMS
@@ -89,24 +106,25 @@ class RolloutCache:
         self.rollouts: list[TeacherRollout] = []
         self.refused = 0  # rollouts not kept for their drift
 
-    def simulate(self, teacher: Teacher) -> tuple[PhysicsIdentity, str, torch.Tensor, torch.Tensor, torch.Tensor]:
-        """C over a random clip window on a random identity, redrawn (up to ``MAX_DRAWS``) while
-        its ``drift`` fails the config's checks: (identity, clip name, joint rotations (T,31,3,3),
-        root path (T,3), C's garment (T,V,3))."""
-        for attempt in range(MAX_DRAWS):
-            identity, name, rotations, root, positions, rise, gap = self._draw(teacher)
-            too_high = self.config.max_rise > 0 and rise > self.config.max_rise
-            too_far = self.config.max_gap > 0 and gap > self.config.max_gap
-            if not (too_high or too_far) or attempt == MAX_DRAWS - 1:
-                return identity, name, rotations, root, positions
+    def simulate(self, teacher: Teacher) -> SimulatedRollout:
+        """C over a random clip window on a random identity, redrawn while its ``drift``
+        fails the config's checks (the last of ``MAX_DRAWS`` draws is kept whatever it is)."""
+        for _ in range(MAX_DRAWS - 1):
+            draw = self._draw(teacher)
+            too_high = self.config.max_rise > 0 and draw.rise > self.config.max_rise
+            too_far = self.config.max_gap > 0 and draw.gap > self.config.max_gap
+            if not (too_high or too_far):
+                return draw
             self.refused += 1
-        raise AssertionError("unreachable")
+        return self._draw(teacher)
 
     def make(self, teacher: Teacher, step: int) -> TeacherRollout:
         """A new rollout of ``teacher`` that passes the drift check (the last of ``MAX_DRAWS`` otherwise)."""
-        return self.assemble(*self.simulate(teacher), step=step)
+        draw = self.simulate(teacher)
+        return self.assemble(draw.identity, draw.motion, draw.joint_rotations, draw.root, draw.positions, step,
+                             posed=draw.posed)
 
-    def _draw(self, teacher: Teacher):
+    def _draw(self, teacher: Teacher) -> SimulatedRollout:
         """One rollout of ``teacher`` (put in eval mode for it: its input statistics stay as
         they are) and its ``drift``."""
         data = self.data
@@ -124,17 +142,20 @@ class RolloutCache:
         finally:
             teacher.train(was_training)
         rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
-        return identity, window.name, window.joint_rotations, root, positions, rise, gap
+        return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap)
 
     def assemble(self, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor, root: torch.Tensor,
-                 positions: torch.Tensor, step: int = 0) -> TeacherRollout:
-        """A cache entry: the posed body and the identity's geometry (bones, UV maps, graph) added."""
-        posed = identity.body.pose(joint_rotations, root)
+                 positions: torch.Tensor, step: int = 0, posed: PosedBody | None = None,
+                 source: str = "") -> TeacherRollout:
+        """A cache entry: the identity's geometry (bones, UV maps, graph) and the posed body
+        added (``posed``: already posed along ``joint_rotations``, ``root``)."""
+        if posed is None:
+            posed = identity.body.pose(joint_rotations, root)
         garment = identity.garment
         geometry = IdentityGeometry.build(garment, identity.body, self.num_bones, self.uv_resolution, self.device,
                                           name=identity.name)
         return TeacherRollout(identity, geometry, joint_rotations, root, posed.skinning_transforms, posed.vertices,
-                              positions.float(), garment.edges(), motion, step)
+                              positions.float(), garment.edges(), motion, step, source=source)
 
     def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
         """A rollout saved by ``save_rollout``, rebuilt on this config's garments."""
@@ -145,7 +166,7 @@ class RolloutCache:
             raise InputFileError(path, f"{record['positions'].shape[1]} garment vertices, but {record['template']} at "
                                        f"{record['resolution']} has {identity.rest.rest_vertices.shape[0]} here")
         return self.assemble(identity, record["motion"], record["joint_rotations"], record["root_translation"],
-                             record["positions"], step)
+                             record["positions"], step, source=str(path))
 
     def refresh(self, teacher: Teacher, step: int) -> TeacherRollout:
         """Add a rollout (from the bank when the config names one and it holds a rollout not
@@ -155,9 +176,7 @@ class RolloutCache:
             cached = {r.source for r in self.rollouts}
             unused = [path for path in bank_files(self.config.bank) if str(path) not in cached]
             if unused:
-                path = self.data.random.choice(unused)
-                rollout = self.load(path, step)
-                rollout.source = str(path)
+                rollout = self.load(self.data.random.choice(unused), step)
         if rollout is None:
             rollout = self.make(teacher, step)
         if len(self.rollouts) >= self.config.cache_size:
@@ -225,9 +244,9 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     written = []
     with torch.no_grad():
         for index in tqdm(range(first, first + count), desc="rollouts", disable=not progress, unit="rollout"):
-            identity, motion, rotations, root, positions = cache.simulate(teacher)
-            written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", identity, motion, rotations, root,
-                                        positions))
+            draw = cache.simulate(teacher)
+            written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", draw.identity, draw.motion,
+                                        draw.joint_rotations, draw.root, draw.positions))
     if progress:
         print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} redrawn for drift)")
     return written
