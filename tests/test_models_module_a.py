@@ -1,6 +1,7 @@
 """Module A's networks: the local frame, Bone-Net with FiLM, bone corrections, the Conv-MLP."""
 
 import math
+from dataclasses import asdict, replace
 
 import pytest
 import torch
@@ -10,7 +11,9 @@ from hyperbones.geometry.rotations import rot_z
 from hyperbones.models.module_a import (ModuleA, ModuleAConfig, bone_window_features, correct_bones,
                                         heading_frame)
 
-SMALL = ModuleAConfig(num_bones=8, shape_code=16, hidden=32, pose_embedding=4, uv_features=5, uv_resolution=16)
+SMALL = ModuleAConfig(num_bones=8, shape_code=16, hidden=32, pose_embedding=4, uv_features=5, uv_resolution=16,
+                      bone_net="global")
+PER_BONE = replace(SMALL, bone_net="per-bone", window_frames=4)
 
 
 def test_heading_frame_puts_the_hips_at_the_origin_facing_minus_y():
@@ -75,6 +78,44 @@ def test_film_changes_the_output():
     a = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
     b = model.bone_net(features, model.modulator(torch.randn(1, SMALL.shape_code)))[0]
     assert (a - b).abs().max() > 1e-3
+
+
+def test_untrained_per_bone_net_changes_nothing():
+    torch.manual_seed(2)
+    model = ModuleA(PER_BONE)
+    window = torch.randn(3, 4, 8, 3) * 0.1
+    codes = torch.randn(3, 8, PER_BONE.bone_code_features)
+    delta, embedding = model.bone_corrections(window, codes, model.modulator(torch.randn(3, PER_BONE.shape_code)))
+    assert delta.shape == (3, 8, 9) and embedding.shape == (3, PER_BONE.pose_embedding)
+    assert torch.equal(delta, torch.zeros_like(delta))
+
+
+def test_per_bone_net_follows_the_bones_not_their_order():
+    """Listing the same bones in another order reorders their corrections and leaves φ as it is."""
+    torch.manual_seed(3)
+    model = ModuleA(PER_BONE)
+    torch.nn.init.normal_(model.bone_net.corrections.weight, std=0.1)
+    window = torch.randn(2, 4, 8, 3) * 0.1
+    codes = torch.randn(2, 8, PER_BONE.bone_code_features)
+    film = model.modulator(torch.randn(2, PER_BONE.shape_code))
+    order = torch.randperm(8)
+    delta, embedding = model.bone_corrections(window, codes, film)
+    moved, moved_embedding = model.bone_corrections(window[:, :, order], codes[:, order], film)
+    assert delta.abs().max() > 1e-3
+    assert torch.allclose(moved, delta[:, order], atol=1e-6)
+    assert torch.allclose(moved_embedding, embedding, atol=1e-6)
+    other = codes.clone()
+    other[:, 0] += 1.0  # another bone code: that bone's correction changes
+    assert (model.bone_corrections(window, other, film)[0][:, 0] - delta[:, 0]).abs().max() > 1e-4
+
+
+def test_bone_net_choice_and_old_configs():
+    with pytest.raises(ParameterError, match="bone_net"):
+        ModuleAConfig(bone_net="mlp")
+    saved = asdict(PER_BONE)
+    del saved["bone_net"]  # a checkpoint from before the choice existed
+    assert ModuleAConfig.from_dict(saved).bone_net == "global"
+    assert ModuleAConfig.from_dict(asdict(PER_BONE)).bone_net == "per-bone"
 
 
 def test_bone_corrections():

@@ -368,9 +368,9 @@ def build_parser() -> argparse.ArgumentParser:
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
     simulate.add_argument("--method", default="lbs",
                           help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet), "
-                               "hyperbones (the per-frame bone runtime, garment pushed out of the body each frame), "
-                               "hyperbones-raw (the same without that contact step) or physics (each frame's energy "
-                               "minimised by L-BFGS: slow, the teacher's reference)")
+                               "hyperbones (the per-frame bone runtime, garment pushed out of the body and its "
+                               "strain limited each frame), hyperbones-raw (Module A alone, without that step) or "
+                               "physics (each frame's energy minimised by L-BFGS: slow, the teacher's reference)")
     simulate.add_argument("--checkpoint", default=None,
                           help="teacher or HyperBones checkpoint (default: the one shipped in the package)")
     simulate.add_argument("--device", default="auto", help="cpu, cuda or auto (CUDA when present; default)")
@@ -398,7 +398,7 @@ def build_parser() -> argparse.ArgumentParser:
                                 description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
     evaluation.add_argument("--methods", default="lbs",
                             help="comma list of methods: lbs, teacher, hyperbones, hyperbones-raw (no contact "
-                                 "step), physics (default: lbs); physics minimises each frame's energy with L-BFGS, "
+                                 "or strain step), physics (default: lbs); physics minimises each frame's energy with L-BFGS, "
                                  "the teacher's slow reference")
     evaluation.add_argument("--checkpoint", default=None,
                             help="teacher or HyperBones checkpoint (default: the shipped ones; a HyperBones one "

@@ -2,7 +2,7 @@
 
 Per frame, for a batch of N characters that share the bone count B:
 
-  bone window (N,3,B,3) ──Bone-Net (FiLM by the shape code)──> ΔT (N,B,9), pose embedding φ (N,P)
+  bone window (N,K,B,3), bone codes (N,B,C) ──Bone-Net (FiLM by the shape code)──> ΔT (N,B,9), pose embedding φ (N,P)
   bone frames + ΔT ──garment LBS with the identity's weights──> Stage-1 garment (V,3)
   [P_UV | coverage | F_UV | φ] (N,C,R,R) ──Conv-MLP──> displacement image (N,3,R,R) ──> δp (V,3)
 
@@ -17,6 +17,18 @@ paper's input without its redundant copies. Positions are in metres, displacemen
 centimetres per frame (both of order one). A window longer than the paper's lets the output
 keep changing for K−1 frames after the body stops: with K = 3 a still body freezes the
 garment two frames later, so no swing after a stop can be expressed.
+
+Bone-Net comes in two forms (``bone_net``):
+  - "per-bone" (default): one MLP shared by every bone, on that bone's own window and its
+    *bone code* (which body joints drive it, where it sits on the canonical body, Module B's
+    feature of its garment vertex), with the bones' mean hidden state added as context
+    (a DeepSets layer). Its output for a bone depends on what the bone is, not on its index.
+  - "global": the paper's single MLP on all bones' windows at once, one output slot per
+    bone index. Bones are placed by farthest point sampling on each fitted garment, so
+    index b is a different place on every identity: across 16 bank rollouts the same
+    index was the nearest bone of another identity of the same template for 1–4 % of the
+    bones. This Bone-Net cannot carry what it learnt on one identity to the next; trained
+    on 65 identities it did no better on held-out clips than no correction at all.
 
 Corrections: the 6D rotation of each bone frame (first two columns of its rotation) gets
 Δ6D added before Gram–Schmidt (the paper's rule), its position Δt (the network's output in
@@ -33,10 +45,12 @@ import torch
 from torch import nn
 
 from hyperbones.errors import ParameterError
+from hyperbones.body.skeleton import NUM_JOINTS
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.motion.motion import heading_angle
 
 CENTIMETRE = 0.01
+BONE_NETS = ("per-bone", "global")
 
 
 @dataclass(frozen=True)
@@ -49,6 +63,8 @@ class ModuleAConfig:
     window_frames: K frames of bone motion Bone-Net sees (paper 3).
     conv_channels: the Conv-MLP's hidden widths (64, 128, 64), then 3.
     use_conv: False drops Stage 2 (the "no Conv-MLP" ablation).
+    bone_net: "per-bone" (one MLP shared by the bones) or "global" (the paper's; see the
+    module docstring). Checkpoints from before the choice existed are "global".
     """
 
     num_bones: int = 128
@@ -61,8 +77,11 @@ class ModuleAConfig:
     conv_channels: tuple[int, int, int] = (64, 128, 64)
     use_conv: bool = True
     window_frames: int = 3
+    bone_net: str = "per-bone"
 
     def __post_init__(self):
+        if self.bone_net not in BONE_NETS:
+            raise ParameterError(f"runtime.bone_net must be one of {', '.join(BONE_NETS)}, got {self.bone_net!r}")
         if self.window_frames < 2:
             raise ParameterError(f"runtime.window_frames must be at least 2 (a position and a velocity), "
                                  f"got {self.window_frames}")
@@ -73,12 +92,18 @@ class ModuleAConfig:
         its K−1 displacements."""
         return 3 * self.window_frames * self.num_bones
 
+    @property
+    def bone_code_features(self) -> int:
+        """C of a bone code: joint weights (31), canonical position from the Hips (3), f_v (d_f)."""
+        return NUM_JOINTS + 3 + self.uv_features
+
     @classmethod
     def from_dict(cls, values: dict) -> "ModuleAConfig":
         """From ``asdict``'s output as a checkpoint stores it (lists back to tuples)."""
         values = dict(values)
         if "conv_channels" in values:
             values["conv_channels"] = tuple(values["conv_channels"])
+        values.setdefault("bone_net", "global")  # saved before the per-bone form existed
         return cls(**values)
 
 
@@ -101,6 +126,14 @@ def bone_window_features(window: torch.Tensor) -> torch.Tensor:
     the positions at t (m), then per bone its K−1 displacements (cm per frame, oldest first)."""
     displacement = (window[:, 1:] - window[:, :-1]) / CENTIMETRE  # (N,K-1,B,3)
     return torch.cat([window[:, -1].flatten(1), displacement.transpose(1, 2).flatten(1)], dim=1)
+
+
+def bone_codes(joint_weights: torch.Tensor, rest_positions: torch.Tensor, hips: torch.Tensor,
+               vertex_features: torch.Tensor, garment_vertex: torch.Tensor) -> torch.Tensor:
+    """What each bone is, for the per-bone Bone-Net: (B,J) body joint weights, (B,3) canonical
+    bone positions, (3,) canonical Hips, (V,d_f) Module B's vertex features, (B,) the bones'
+    garment vertices -> (B, J+3+d_f): joint weights, position from the Hips (m), f_v."""
+    return torch.cat([joint_weights, rest_positions - hips, vertex_features[garment_vertex]], dim=-1)
 
 
 class ShapeModulator(nn.Module):
@@ -149,6 +182,41 @@ class BoneNet(nn.Module):
         return delta, self.pose_embedding(h)
 
 
+class PerBoneNet(nn.Module):
+    """One MLP for all bones: (N,K,B,3) local bone window, (N,B,C) bone codes and FiLM
+    (N,layers,2,hidden) -> ΔT (N,B,9), φ (N,P).
+
+    Layer 1 reads a bone's position at t (m), its K−1 displacements (cm per frame) and its
+    code; layer 2 also reads the mean of layer 1 over the character's bones (the pose of
+    the whole garment); FiLM acts on every hidden layer as in the global form. φ comes from
+    the mean of the last hidden layer over the bones.
+    """
+
+    def __init__(self, config: ModuleAConfig):
+        super().__init__()
+        if config.layers < 2:
+            raise ParameterError(f"the per-bone Bone-Net needs at least 2 layers, got {config.layers}")
+        hidden = config.hidden
+        sizes = [3 * config.window_frames + config.bone_code_features, 2 * hidden] + [hidden] * (config.layers - 2)
+        self.hidden_layers = nn.ModuleList(nn.Linear(size, hidden) for size in sizes)
+        self.corrections = nn.Linear(hidden, 9)
+        self.pose_embedding = nn.Linear(hidden, config.pose_embedding)
+        nn.init.zeros_(self.corrections.weight)
+        nn.init.zeros_(self.corrections.bias)
+
+    def forward(self, window: torch.Tensor, codes: torch.Tensor,
+                film: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        displacement = (window[:, 1:] - window[:, :-1]).transpose(1, 2).flatten(2) / CENTIMETRE  # (N,B,3(K-1))
+        h = torch.cat([window[:, -1], displacement, codes], dim=-1)
+        for index, layer in enumerate(self.hidden_layers):
+            if index == 1:
+                h = torch.cat([h, h.mean(1, keepdim=True).expand_as(h)], dim=-1)
+            h = torch.relu(film[:, index, None, 0] * layer(h) + film[:, index, None, 1])
+        delta = self.corrections(h)
+        delta = torch.cat([delta[..., :6], delta[..., 6:] * CENTIMETRE], dim=-1)
+        return delta, self.pose_embedding(h.mean(1))
+
+
 def correct_bones(rotations: torch.Tensor, positions: torch.Tensor,
                   delta: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Bone frames (...,B,3,3), (...,B,3) and ΔT (...,B,9) -> corrected frames (6D rotations add)."""
@@ -188,9 +256,17 @@ class ModuleA(nn.Module):
         super().__init__()
         self.config = config
         self.modulator = ShapeModulator(config)
-        self.bone_net = BoneNet(config)
+        self.bone_net = PerBoneNet(config) if config.bone_net == "per-bone" else BoneNet(config)
         in_channels = 3 + 1 + config.uv_features + config.pose_embedding
         self.refiner = ConvRefiner(in_channels, config.conv_channels) if config.use_conv else None
+
+    def bone_corrections(self, window: torch.Tensor, codes: torch.Tensor,
+                         film: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Bone-Net in either form: (N,K,B,3) local bone window, (N,B,C) bone codes (unused by
+        the global form), (N,layers,2,hidden) FiLM -> ΔT (N,B,9), φ (N,P)."""
+        if isinstance(self.bone_net, PerBoneNet):
+            return self.bone_net(window, codes, film)
+        return self.bone_net(bone_window_features(window), film)
 
     def refine(self, positions_uv: torch.Tensor, coverage: torch.Tensor, features_uv: torch.Tensor,
                pose_embedding: torch.Tensor) -> torch.Tensor:

@@ -1,4 +1,5 @@
-"""Body contact for the per-frame runtime: garment vertices inside the body pushed out.
+"""Body contact for the per-frame runtime: garment vertices inside the body pushed out,
+then the garment's edges pulled back towards their rest lengths.
 
 Module A has no state to resolve contact with (its L_interp only discourages penetration),
 so after each frame the vertices that end up inside the body, or closer to it than
@@ -8,6 +9,12 @@ that lands inside a neighbouring face (in a crease) is projected again, up to ``
 Cost per frame: one BVH refit over the posed body, one nearest-face query per garment
 vertex within ``QUERY_DISTANCE`` and the re-queries; on the 8k-vertex dress ~18 ms on one
 CPU core (``bench``: hyperbones against hyperbones-raw), of which the first query is ~9 ms.
+
+Strain limiting (``limiters``): the teacher's projection (``physics.strain_limit``, the same
+band: edges within 0.97–1.01 of their rest length) for ``StrainLimiter.iterations`` Jacobi
+sweeps, with the vertices found within ``PLANE_REACH`` of the skin held outside their face's
+plane after every sweep, as the teacher does. Module A blends bones, and where neighbouring
+bones disagree its cloth stretches; these sweeps remove most of that at a fixed cost.
 """
 
 from __future__ import annotations
@@ -19,17 +26,34 @@ from hyperbones.physics.energies import COLLISION_EPSILON
 
 QUERY_DISTANCE = 0.1  # m: body faces are looked for this far from each garment vertex
 ROUNDS = 4  # projections at most; later ones only for vertices a projection left inside
+PLANE_REACH = 0.01  # m: vertices this close to the skin keep to its outside while edges are limited
+
+
+def runtime_limiter(rest_vertices: torch.Tensor, faces: torch.Tensor, iterations: int):
+    """The teacher's strain limiter for a garment's (V,3) canonical vertices and (F,3) faces
+    (no pinned vertices: Module A places every vertex), with ``iterations`` sweeps."""
+    from hyperbones.physics.cloth import ClothRest
+    from hyperbones.physics.strain_limit import StrainLimiter
+
+    rest = ClothRest.from_mesh(rest_vertices.float(), faces)
+    return StrainLimiter.build(rest.edges, rest.edge_lengths, rest.vertex_masses,
+                               torch.zeros(rest_vertices.shape[0], dtype=torch.bool, device=rest_vertices.device),
+                               iterations=iterations)
 
 
 class BodyContact:
     """One BVH per character over its body's triangles (F,3), refit every frame."""
 
     def __init__(self, body_faces: torch.Tensor, characters: int, device: str | torch.device = "cpu",
-                 margin: float = COLLISION_EPSILON):
+                 margin: float = COLLISION_EPSILON, limiters: list | None = None):
+        """limiters: one ``StrainLimiter`` per character (``runtime_limiter``), or None."""
         from hyperbones.geometry.proximity import BodyProximity  # Warp: only when contact is asked for
 
+        if limiters is not None and len(limiters) != characters:
+            raise ParameterError(f"contact got {len(limiters)} strain limiters for {characters} characters")
         self.margin = margin
         self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
+        self.limiters = limiters or [None] * characters
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments pushed out."""
@@ -38,10 +62,13 @@ class BodyContact:
         if bodies.shape[0] != len(self.proximities):
             raise ParameterError(f"contact needs one posed body per character ({len(self.proximities)}), "
                                  f"got {bodies.shape[0]}")
+        from hyperbones.physics.contact import ContactPlanes
+
         out = []
-        for proximity, garment, body in zip(self.proximities, garments, bodies):
+        for proximity, limiter, garment, body in zip(self.proximities, self.limiters, garments, bodies):
             proximity.update(body)
             nearest = proximity.query(garment, max_distance=QUERY_DISTANCE)
+            near_skin = nearest.signed_distance < PLANE_REACH
             moved = nearest.found & (nearest.signed_distance < self.margin)
             garment = push_outside(garment, nearest, self.margin)
             for _ in range(ROUNDS - 1):
@@ -55,5 +82,7 @@ class BodyContact:
                     break
                 garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
                 moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
+            if limiter is not None:
+                garment = limiter.project(garment, ContactPlanes.nearest(nearest, near_skin, self.margin))
             out.append(garment)
         return out

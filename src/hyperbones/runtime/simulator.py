@@ -23,7 +23,7 @@ import torch
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_window_features, correct_bones, heading_frame
+from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_codes, correct_bones, heading_frame
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.identity import Identity
 
@@ -31,6 +31,9 @@ if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
 
+
+
+STRAIN_ITERATIONS = 20  # sweeps of the runtime's strain limiting after contact (runtime.contact)
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -78,19 +81,24 @@ class IdentityBatch:
     """N identity caches (one per character; the same one may repeat) with the inputs the
     Bone-Net and the Conv-MLP take from them stacked once, not every frame.
 
-    film: (N,layers,2,hidden); features_uv: (N,d_f,R,R); coverage: (N,1,R,R).
+    film: (N,layers,2,hidden); features_uv: (N,d_f,R,R); coverage: (N,1,R,R);
+    codes: (N,B,C) the per-bone Bone-Net's bone codes (``module_a.bone_codes``).
     """
 
     identities: list[Identity]
     film: torch.Tensor
     features_uv: torch.Tensor
     coverage: torch.Tensor
+    codes: torch.Tensor
 
     @classmethod
     def of(cls, identities: list[Identity]) -> "IdentityBatch":
+        codes = [bone_codes(identity.bones.joint_weights, identity.bones.rest_positions,
+                            identity.rest_joint_positions[0], identity.vertex_features, identity.bones.garment_vertex)
+                 for identity in identities]
         return cls(identities, torch.stack([identity.film for identity in identities]),
                    torch.stack([identity.features_uv for identity in identities]),
-                   torch.stack([identity.raster.coverage for identity in identities])[:, None])
+                   torch.stack([identity.raster.coverage for identity in identities])[:, None], torch.stack(codes))
 
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
@@ -108,7 +116,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
     """
     identities = batch.identities
     local_window = transform_points(to_local[:, None], window)
-    delta, pose_embedding = module_a.bone_net(bone_window_features(local_window), batch.film)
+    delta, pose_embedding = module_a.bone_corrections(local_window, batch.codes, batch.film)
     local_rotations = to_local[:, None, :3, :3] @ rotations
     local_positions = transform_points(to_local, positions)
     local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
@@ -136,9 +144,10 @@ class Simulator:
     """
 
     def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu",
-                 body_faces: torch.Tensor | None = None):
+                 body_faces: torch.Tensor | None = None, strain_iterations: int = STRAIN_ITERATIONS):
         """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
-        them ``step`` can take the posed bodies and resolve contact."""
+        them ``step`` can take the posed bodies and resolve contact, then limit the garment's
+        strain with ``strain_iterations`` sweeps (0: contact only)."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")
         bones = {identity.bones.num_bones for identity in identities}
@@ -159,13 +168,18 @@ class Simulator:
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
         self.contact = None
         if body_faces is not None:
-            from hyperbones.runtime.contact import BodyContact
+            from hyperbones.runtime.contact import BodyContact, runtime_limiter
 
-            self.contact = BodyContact(body_faces, len(identities), self.device)
+            limiters = None
+            if strain_iterations > 0:
+                limiters = [runtime_limiter(identity.rest_vertices, identity.faces, strain_iterations)
+                            for identity in self.identities]
+            self.contact = BodyContact(body_faces, len(identities), self.device, limiters=limiters)
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
-             uv_resolution: int | None = None, contact: bool = True) -> "Simulator":
+             uv_resolution: int | None = None, contact: bool = True,
+             strain_iterations: int = STRAIN_ITERATIONS) -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
         shipped one). ``contact``: ``step`` may then take the posed bodies (all characters
@@ -176,7 +190,8 @@ class Simulator:
         with torch.no_grad():
             identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
                           for garment, body in characters]
-        return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None)
+        return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None,
+                   strain_iterations=strain_iterations)
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
