@@ -5,7 +5,8 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity
-from hyperbones.runtime.contact import BodyContact, runtime_limiter
+from hyperbones.runtime.contact import BodyContact
+from hyperbones.runtime.isometry import EdgeProjection
 
 
 def test_points_inside_the_body_come_out_and_the_others_stay(body):
@@ -39,30 +40,31 @@ def _grid(rows: int, cols: int, spacing: float) -> tuple[torch.Tensor, torch.Ten
     return vertices, torch.cat([torch.stack([a, b, d], 1), torch.stack([a, d, c], 1)])
 
 
-def test_strain_limiting_pulls_a_stretched_sheet_back_and_keeps_it_out_of_the_body(body):
+def test_edge_projection_pulls_a_stretched_sheet_back_and_keeps_it_out_of_the_body(body):
     vertices, faces = body.rest_vertices, body.faces
     sheet, sheet_faces = _grid(12, 12, 0.02)
-    # 5 cm in front of the chest (the A-pose faces −Y), then stretched by 15 % across.
+    # 15 cm in front of the chest (the A-pose faces −Y), then stretched by 15 % across.
     front = float(vertices[(vertices[:, 2] > 1.2) & (vertices[:, 2] < 1.3) & (vertices[:, 0].abs() < 0.05), 1].min())
-    placed = sheet + torch.tensor([-0.11, front + 0.05, 1.14])
+    placed = sheet + torch.tensor([-0.11, front - 0.15, 1.14])
     stretched = placed * torch.tensor([1.15, 1.0, 1.0]) - torch.tensor([placed[:, 0].mean() * 0.15, 0, 0])
-    limiter = runtime_limiter(placed, sheet_faces, iterations=40)
+    projection = EdgeProjection(placed, sheet_faces)
     plain = BodyContact(faces, characters=1, margin=0.002)
-    limited = BodyContact(faces, characters=1, margin=0.002, limiters=[limiter])
-    first, second = limiter.edges[:, 0], limiter.edges[:, 1]
+    limited = BodyContact(faces, characters=1, margin=0.002, projections=[projection])
+    first, second = projection.edges[:, 0], projection.edges[:, 1]
 
     def strain(points):
-        return ((points[second] - points[first]).norm(dim=1) / limiter.rest_lengths - 1).abs().mean()
+        return ((points[second] - points[first]).norm(dim=1) / projection.rest_lengths - 1).abs().mean()
 
     (kept,) = plain([stretched], vertices[None])
     (pulled,) = limited([stretched], vertices[None])
     assert float(strain(kept)) > 0.05
     assert float(strain(pulled)) < 0.5 * float(strain(kept))
     pressed = pulled.clone()
-    pressed[:, 1] = torch.minimum(pressed[:, 1], torch.tensor(front - 0.01))  # all of it a centimetre into the chest
-    (out,) = limited([pressed], vertices[None])
+    pressed[:, 1] = front + 0.01  # flattened onto a plane a centimetre behind the chest's front
     proximity = BodyProximity(faces)
     proximity.update(vertices)
+    assert float(proximity.query(pressed, max_distance=0.1).signed_distance.min()) < -0.005
+    (out,) = limited([pressed], vertices[None])
     assert float(proximity.query(out, max_distance=0.1).signed_distance.min()) > 0.0
-    with pytest.raises(ParameterError, match="strain limiters"):
-        BodyContact(faces, characters=2, limiters=[limiter])
+    with pytest.raises(ParameterError, match="edge projections"):
+        BodyContact(faces, characters=2, projections=[projection])

@@ -10,11 +10,10 @@ Cost per frame: one BVH refit over the posed body, one nearest-face query per ga
 vertex within ``QUERY_DISTANCE`` and the re-queries; on the 8k-vertex dress ~18 ms on one
 CPU core (``bench``: hyperbones against hyperbones-raw), of which the first query is ~9 ms.
 
-Strain limiting (``limiters``): the teacher's projection (``physics.strain_limit``, the same
-band: edges within 0.97–1.01 of their rest length) for ``StrainLimiter.iterations`` Jacobi
-sweeps, with the vertices found within ``PLANE_REACH`` of the skin held outside their face's
-plane after every sweep, as the teacher does. Module A blends bones, and where neighbouring
-bones disagree its cloth stretches; these sweeps remove most of that at a fixed cost.
+Edge projection (``projections``, ``runtime.isometry.EdgeProjection``): after the push-out,
+the garment's edges are pulled back towards the teacher's band around their rest lengths,
+with the vertices found within ``PLANE_REACH`` of the skin held outside their face's plane
+after every iteration; what the projection moved inside is then pushed out again.
 """
 
 from __future__ import annotations
@@ -29,60 +28,58 @@ ROUNDS = 4  # projections at most; later ones only for vertices a projection lef
 PLANE_REACH = 0.01  # m: vertices this close to the skin keep to its outside while edges are limited
 
 
-def runtime_limiter(rest_vertices: torch.Tensor, faces: torch.Tensor, iterations: int):
-    """The teacher's strain limiter for a garment's (V,3) canonical vertices and (F,3) faces
-    (no pinned vertices: Module A places every vertex), with ``iterations`` sweeps."""
-    from hyperbones.physics.cloth import ClothRest
-    from hyperbones.physics.strain_limit import StrainLimiter
-
-    rest = ClothRest.from_mesh(rest_vertices.float(), faces)
-    return StrainLimiter.build(rest.edges, rest.edge_lengths, rest.vertex_masses,
-                               torch.zeros(rest_vertices.shape[0], dtype=torch.bool, device=rest_vertices.device),
-                               iterations=iterations)
-
-
 class BodyContact:
     """One BVH per character over its body's triangles (F,3), refit every frame."""
 
     def __init__(self, body_faces: torch.Tensor, characters: int, device: str | torch.device = "cpu",
-                 margin: float = COLLISION_EPSILON, limiters: list | None = None):
-        """limiters: one ``StrainLimiter`` per character (``runtime_limiter``), or None."""
+                 margin: float = COLLISION_EPSILON, projections: list | None = None):
+        """projections: one ``EdgeProjection`` per character, or None."""
         from hyperbones.geometry.proximity import BodyProximity  # Warp: only when contact is asked for
 
-        if limiters is not None and len(limiters) != characters:
-            raise ParameterError(f"contact got {len(limiters)} strain limiters for {characters} characters")
+        if projections is not None and len(projections) != characters:
+            raise ParameterError(f"contact got {len(projections)} edge projections for {characters} characters")
         self.margin = margin
         self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
-        self.limiters = limiters or [None] * characters
+        self.projections = projections or [None] * characters
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
-        """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments pushed out."""
-        from hyperbones.geometry.proximity import push_outside
+        """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
+        pushed out (and, with projections, their edges projected, then pushed out again)."""
+        from hyperbones.physics.contact import ContactPlanes
 
         if bodies.shape[0] != len(self.proximities):
             raise ParameterError(f"contact needs one posed body per character ({len(self.proximities)}), "
                                  f"got {bodies.shape[0]}")
-        from hyperbones.physics.contact import ContactPlanes
-
         out = []
-        for proximity, limiter, garment, body in zip(self.proximities, self.limiters, garments, bodies):
+        for proximity, projection, garment, body in zip(self.proximities, self.projections, garments, bodies):
             proximity.update(body)
-            nearest = proximity.query(garment, max_distance=QUERY_DISTANCE)
-            near_skin = nearest.signed_distance < PLANE_REACH
-            moved = nearest.found & (nearest.signed_distance < self.margin)
-            garment = push_outside(garment, nearest, self.margin)
-            for _ in range(ROUNDS - 1):
-                # Pushed off one face, a vertex in a crease can land inside the next one.
-                index = torch.nonzero(moved).squeeze(1)
-                if len(index) == 0:
-                    break
-                again = proximity.query(garment[index], max_distance=QUERY_DISTANCE)
-                inside = again.found & (again.signed_distance < 0)
-                if not bool(inside.any()):
-                    break
-                garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
-                moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
-            if limiter is not None:
-                garment = limiter.project(garment, ContactPlanes.nearest(nearest, near_skin, self.margin))
+            garment, nearest = self._push_out(proximity, garment)
+            if projection is not None:
+                garment = projection.project(garment, ContactPlanes.nearest(nearest, nearest.signed_distance < PLANE_REACH,
+                                                                         self.margin))
+                # The projection moves vertices away from the skin planes too; what it moved
+                # inside comes out again.
+                garment, _ = self._push_out(proximity, garment)
             out.append(garment)
         return out
+
+    def _push_out(self, proximity, garment: torch.Tensor):
+        """(V,3) -> (V,3) with every vertex inside the body or within the margin moved out to
+        the margin (up to ``ROUNDS`` projections), and the first query's ``Nearest``."""
+        from hyperbones.geometry.proximity import push_outside
+
+        nearest = proximity.query(garment, max_distance=QUERY_DISTANCE)
+        moved = nearest.found & (nearest.signed_distance < self.margin)
+        garment = push_outside(garment, nearest, self.margin)
+        for _ in range(ROUNDS - 1):
+            # Pushed off one face, a vertex in a crease can land inside the next one.
+            index = torch.nonzero(moved).squeeze(1)
+            if len(index) == 0:
+                break
+            again = proximity.query(garment[index], max_distance=QUERY_DISTANCE)
+            inside = again.found & (again.signed_distance < 0)
+            if not bool(inside.any()):
+                break
+            garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
+            moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
+        return garment, nearest

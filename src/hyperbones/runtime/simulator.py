@@ -33,7 +33,7 @@ if TYPE_CHECKING:
 
 
 
-STRAIN_ITERATIONS = 20  # sweeps of the runtime's strain limiting after contact (runtime.contact)
+PROJECTION_ITERATIONS = 10  # of the edge projection after contact (runtime.isometry)
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -144,10 +144,10 @@ class Simulator:
     """
 
     def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu",
-                 body_faces: torch.Tensor | None = None, strain_iterations: int = STRAIN_ITERATIONS):
+                 body_faces: torch.Tensor | None = None, projection_iterations: int = PROJECTION_ITERATIONS):
         """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
-        them ``step`` can take the posed bodies and resolve contact, then limit the garment's
-        strain with ``strain_iterations`` sweeps (0: contact only)."""
+        them ``step`` can take the posed bodies and resolve contact, then pull the garment's
+        edges towards their rest lengths with ``projection_iterations`` (0: contact only)."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")
         bones = {identity.bones.num_bones for identity in identities}
@@ -168,18 +168,19 @@ class Simulator:
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
         self.contact = None
         if body_faces is not None:
-            from hyperbones.runtime.contact import BodyContact, runtime_limiter
+            from hyperbones.runtime.contact import BodyContact
+            from hyperbones.runtime.isometry import EdgeProjection
 
-            limiters = None
-            if strain_iterations > 0:
-                limiters = [runtime_limiter(identity.rest_vertices, identity.faces, strain_iterations)
-                            for identity in self.identities]
-            self.contact = BodyContact(body_faces, len(identities), self.device, limiters=limiters)
+            projections = None
+            if projection_iterations > 0:
+                projections = [EdgeProjection(identity.rest_vertices, identity.faces, projection_iterations)
+                               for identity in self.identities]
+            self.contact = BodyContact(body_faces, len(identities), self.device, projections=projections)
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
              uv_resolution: int | None = None, contact: bool = True,
-             strain_iterations: int = STRAIN_ITERATIONS) -> "Simulator":
+             projection_iterations: int = PROJECTION_ITERATIONS) -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
         shipped one). ``contact``: ``step`` may then take the posed bodies (all characters
@@ -191,7 +192,7 @@ class Simulator:
             identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
                           for garment, body in characters]
         return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None,
-                   strain_iterations=strain_iterations)
+                   projection_iterations=projection_iterations)
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""

@@ -1,0 +1,77 @@
+"""Edge-length projection for the per-frame runtime: Module A's garment pulled back towards its
+rest edge lengths while staying near where Module A put it (a projective-dynamics solve).
+
+Module A blends rigid bone frames; where neighbouring bones move differently, the blend
+stretches the cloth (LBS shows the same artefact). Fixing that locally, edge by edge (the
+teacher's Jacobi strain limiter), spreads a correction one ring of vertices per sweep, so a
+stretch that spans a bone's reach (~10 cm, several rings) needs many sweeps. Here every
+iteration is global instead (Bouaziz et al. 2014, "Projective Dynamics"):
+
+    minimise  Σ_e |(x_i − x_j) − d_e|²  +  α Σ_v |x_v − a_v|²
+
+with a the Module A output and d_e the current edge vector clamped to the teacher's band
+of its rest length (0.97–1.01 l_e). The local step sets every d_e at once; the global step is
+one solve with the constant matrix DᵀD + αI (D: the (E,V) edge-difference matrix), factorised
+once per garment (SuperLU, minimum-degree ordering, single precision: on the 8k dress one
+solve takes 1.8 ms on one core, against 3.8 ms with the default ordering in double). Contact half-spaces (``physics.contact.ContactPlanes``) are
+enforced after every solve, as the teacher's limiter does after every sweep.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse
+import scipy.sparse.linalg
+import torch
+
+from hyperbones.errors import ParameterError
+from hyperbones.physics.strain_limit import COMPRESSION_LIMIT, STRETCH_LIMIT
+
+ANCHOR = 0.02  # α: how strongly each vertex keeps to Module A's output, against an edge's weight 1
+ITERATIONS = 10
+
+
+class EdgeProjection:
+    """The projection for one garment: (V,3) canonical vertices and (F,3) faces; ``project``
+    takes (V,3) positions (any device) and returns them on that device.
+
+    edges: (E,2) the garment's undirected edges; rest_lengths: (E,) m.
+    """
+
+    def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor, iterations: int = ITERATIONS,
+                 anchor: float = ANCHOR, stretch: float = STRETCH_LIMIT, compression: float = COMPRESSION_LIMIT):
+        from hyperbones.physics.cloth import ClothRest
+
+        if iterations < 1 or anchor <= 0:
+            raise ParameterError(f"edge projection needs iterations >= 1 and anchor > 0, got {iterations}, {anchor}")
+        rest = ClothRest.from_mesh(rest_vertices.detach().cpu().double(), faces.cpu())
+        self.edges, self.rest_lengths = rest.edges, rest.edge_lengths.float()
+        edges = rest.edges.numpy()
+        count, num_vertices = len(edges), rest_vertices.shape[0]
+        rows = np.repeat(np.arange(count), 2)
+        columns = edges[:, ::-1].reshape(-1)  # x[second] − x[first]
+        signs = np.tile([1.0, -1.0], count)
+        self.difference = scipy.sparse.csr_matrix((signs, (rows, columns)), shape=(count, num_vertices),
+                                                  dtype=np.float32)
+        self.gather = self.difference.T.tocsr()
+        system = (self.gather @ self.difference + anchor * scipy.sparse.identity(num_vertices, dtype=np.float32))
+        self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                                              options={"SymmetricMode": True}).solve
+        lengths = rest.edge_lengths.numpy().astype(np.float32)
+        self.low, self.high = lengths * (1.0 - compression), lengths * (1.0 + stretch)
+        self.anchor, self.iterations = anchor, iterations
+
+    def project(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
+        """(V,3) -> (V,3) after ``iterations`` local/global steps; ``contact`` (a
+        ``ContactPlanes``) is enforced after each."""
+        device, dtype = positions.device, positions.dtype
+        x = positions.detach().cpu().float().numpy()
+        target = self.anchor * x
+        for _ in range(self.iterations):
+            along = self.difference @ x
+            length = np.linalg.norm(along, axis=1).clip(1e-12)
+            wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
+            x = self.solve(self.gather @ wanted + target)
+            if contact is not None:
+                x = contact.project(torch.from_numpy(x)).numpy()
+        return torch.from_numpy(x).to(device=device, dtype=dtype)

@@ -1,0 +1,45 @@
+"""The runtime's edge projection: stretched cloth pulled back to its rest lengths, rigid motion kept."""
+
+import math
+
+import pytest
+import torch
+
+from hyperbones.errors import ParameterError
+from hyperbones.geometry.rotations import rot_z
+from hyperbones.runtime.isometry import EdgeProjection
+from test_runtime_contact import _grid
+
+
+def _edge_strain(projection, points):
+    first, second = projection.edges[:, 0], projection.edges[:, 1]
+    return ((points[second] - points[first]).norm(dim=1) / projection.rest_lengths - 1).abs()
+
+
+def test_a_moved_and_turned_garment_is_left_where_it_is():
+    sheet, faces = _grid(10, 10, 0.02)
+    projection = EdgeProjection(sheet, faces)
+    moved = sheet @ rot_z(torch.tensor(0.7)).T + torch.tensor([0.3, -0.2, 1.0])
+    assert torch.allclose(projection.project(moved), moved, atol=1e-6)
+
+
+def test_a_stretch_spanning_the_sheet_is_largely_removed_and_the_sheet_stays_put():
+    sheet, faces = _grid(16, 16, 0.02)
+    projection = EdgeProjection(sheet, faces)
+    stretched = sheet * torch.tensor([1.2, 1.0, 1.0])  # 20 % along x everywhere
+    # A bulge along y as well, as blended bones leave it: a smooth field of ~1 cm.
+    stretched[:, 1] += 0.01 * torch.sin(sheet[:, 0] * math.pi / 0.3)
+    before, after = _edge_strain(projection, stretched), _edge_strain(projection, projection.project(stretched))
+    assert float(before.mean()) > 0.08
+    assert float(after.mean()) < 0.4 * float(before.mean())  # 0.32 measured: α keeps it near the input
+    out = projection.project(stretched)
+    assert float((out.mean(0) - stretched.mean(0)).norm()) < 0.01  # pulled in, not carried away
+    assert out.dtype == stretched.dtype and out.shape == stretched.shape
+
+
+def test_bad_settings_are_refused():
+    sheet, faces = _grid(3, 3, 0.02)
+    with pytest.raises(ParameterError, match="iterations"):
+        EdgeProjection(sheet, faces, iterations=0)
+    with pytest.raises(ParameterError, match="anchor"):
+        EdgeProjection(sheet, faces, anchor=0.0)
