@@ -71,3 +71,12 @@ def test_simulator_load_and_module_a_alone(joint_checkpoint, body):
     module_a = load_module_a(joint_checkpoint)
     assert all(torch.equal(a, b) for a, b in zip(module_a.state_dict().values(),
                                                  simulator.module_a.state_dict().values()))
+
+
+def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path):
+    out = tmp_path / "eval"
+    assert main(["eval", "--methods", "lbs,hyperbones-raw", "--garments", "tshirt", "--motions", "walk",
+                 "--frames", "4", "--vertices", "1000", "--uv-resolution", "16", "--checkpoint", str(joint_checkpoint),
+                 "--device", "cpu", "--out", str(out), "--quiet"]) == 0
+    methods = [run["method"] for run in json.loads((out / "report.json").read_text())]
+    assert methods == ["lbs", "hyperbones-raw"]

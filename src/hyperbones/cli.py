@@ -178,7 +178,8 @@ def cmd_eval(args) -> int:
     bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
     report = evaluate(_comma_list(args.methods), _comma_list(args.garments), _comma_list(args.motions), bodies,
                       args.out, frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
-                      device=args.device, source_fps=dict(args.source_fps or []), progress=not args.quiet)
+                      device=args.device, source_fps=dict(args.source_fps or []), progress=not args.quiet,
+                      uv_resolution=args.uv_resolution)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
     return 0
@@ -411,6 +412,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_argument("--frames", type=int, default=None, help="only the first N frames of each motion")
     evaluation.add_argument("--vertices", type=int, default=None, help="template resolution")
     evaluation.add_argument("--out", required=True, help="output folder")
+    evaluation.add_argument("--uv-resolution", type=int, default=None,
+                            help="UV size R of the hyperbones methods (default: the model's training one)")
     _add_source_fps_pairs(evaluation)
     evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
     evaluation.set_defaults(func=cmd_eval)

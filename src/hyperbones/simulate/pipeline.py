@@ -75,12 +75,14 @@ class SimulationResult:
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
                    blend_in: int = 15, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
-                   source_fps: float | None = None, progress: bool = False) -> SimulationResult:
+                   source_fps: float | None = None, progress: bool = False,
+                   uv_resolution: int | None = None) -> SimulationResult:
     """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
 
     ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
     CUDA when present) apply to the learnt methods; LBS ignores them. ``source_fps`` is the
-    real capture rate of a BVH clip whose header is wrong.
+    real capture rate of a BVH clip whose header is wrong. ``uv_resolution``: the UV maps'
+    R for the hyperbones methods (default: the model's training one).
     """
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
@@ -94,8 +96,9 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
     cloth = Material.parse(material)
     draped, rest_vertices = draped_garment(garment, the_body, vertices=vertices, piece=piece, material=cloth)
     posed = the_body.pose(the_motion.joint_rotations, the_motion.root_translation)
+    extra = {"uv_resolution": uv_resolution} if method.startswith("hyperbones") else {}
     solver = METHODS[method](draped, the_body, rest_vertices=rest_vertices, material=cloth, checkpoint=checkpoint,
-                             device=device, progress=progress)
+                             device=device, progress=progress, **extra)
     start = time.perf_counter()
     garment_vertices = solver.run(posed)
     elapsed = time.perf_counter() - start
