@@ -2,7 +2,7 @@
 
 Per frame, for a batch of N characters that share the bone count B:
 
-  bone window (N,K,B,3), bone codes (N,B,C) ──Bone-Net (FiLM by the shape code)──> ΔT (N,B,9), pose embedding φ (N,P)
+  bone window (N,K,B,3), bone codes (N,B,C) ──Bone-Net (FiLM by z)──> ΔT (N,B,9), pose embedding φ (N,P)
   bone frames + ΔT ──garment LBS with the identity's weights──> Stage-1 garment (V,3)
   [P_UV | coverage | F_UV | φ] (N,C,R,R) ──Conv-MLP──> displacement image (N,3,R,R) ──> δp (V,3)
 

@@ -13,7 +13,8 @@ CPU core (``bench``: hyperbones against hyperbones-raw), of which the first quer
 Edge projection (``projections``, ``runtime.isometry.EdgeProjection``): after the push-out,
 the garment's edges are pulled back towards the teacher's band around their rest lengths,
 with the vertices found within ``PLANE_REACH`` of the skin held outside their face's plane
-after every iteration; what the projection moved inside is then pushed out again.
+after every iteration; what the projection moved inside is then pushed out again. The two
+push-outs and 10 projection iterations cost ~45 ms per frame on the 8k dress (one CPU core).
 """
 
 from __future__ import annotations
@@ -55,8 +56,8 @@ class BodyContact:
             proximity.update(body)
             garment, nearest = self._push_out(proximity, garment)
             if projection is not None:
-                garment = projection.project(garment, ContactPlanes.nearest(nearest, nearest.signed_distance < PLANE_REACH,
-                                                                         self.margin))
+                planes = ContactPlanes.nearest(nearest, nearest.signed_distance < PLANE_REACH, self.margin)
+                garment = projection.project(garment, planes)
                 # The projection moves vertices away from the skin planes too; what it moved
                 # inside comes out again.
                 garment, _ = self._push_out(proximity, garment)

@@ -13,8 +13,10 @@ with a the Module A output and d_e the current edge vector clamped to the teache
 of its rest length (0.97–1.01 l_e). The local step sets every d_e at once; the global step is
 one solve with the constant matrix DᵀD + αI (D: the (E,V) edge-difference matrix), factorised
 once per garment (SuperLU, minimum-degree ordering, single precision: on the 8k dress one
-solve takes 1.8 ms on one core, against 3.8 ms with the default ordering in double). Contact half-spaces (``physics.contact.ContactPlanes``) are
-enforced after every solve, as the teacher's limiter does after every sweep.
+solve takes 1.8 ms on one core, against 3.8 ms with the default ordering in double).
+Contact half-spaces (``physics.contact.ContactPlanes``) are enforced after every solve, as
+the teacher's limiter does after every sweep. The solve runs on the CPU whatever the
+device of the positions (one (V,3) copy each way per frame).
 """
 
 from __future__ import annotations
@@ -65,6 +67,8 @@ class EdgeProjection:
         """(V,3) -> (V,3) after ``iterations`` local/global steps; ``contact`` (a
         ``ContactPlanes``) is enforced after each."""
         device, dtype = positions.device, positions.dtype
+        if contact is not None and contact.vertex.device.type != "cpu":
+            contact = type(contact)(contact.vertex.cpu(), contact.point.cpu().float(), contact.normal.cpu().float())
         x = positions.detach().cpu().float().numpy()
         target = self.anchor * x
         for _ in range(self.iterations):

@@ -6,7 +6,9 @@ GPU would cost more in kernel launches than in work), one Bone-Net pass (batched
 characters), one (V,B)@(B,12) garment skinning, two sparse products to and from the UV
 image and the Conv-MLP (batched). No state but the last K frames of bone positions, so
 it does not grow with the motion. Given the posed bodies, ``step`` also pushes garment
-vertices that end up inside a body back out (``runtime.contact``).
+vertices that end up inside a body back out and pulls the garment's edges back towards their
+rest lengths (``runtime.contact``, ``runtime.isometry``; on one CPU core ~45 ms of the 77 ms
+per frame of the 8k dress at 64²).
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
