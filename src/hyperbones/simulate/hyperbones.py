@@ -18,7 +18,7 @@ from hyperbones.training.trainer import pick_device
 
 class HyperBonesMethod:
     """Garment positions from the per-frame runtime: Module B once, then Module A per frame,
-    with the garment pushed out of the body and its strain limited after each frame
+    with the garment pushed out of the body and its edges pulled back to length after each frame
     (``contact``; off: Module A's output as it is, the method "hyperbones-raw")."""
 
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor | None = None,
