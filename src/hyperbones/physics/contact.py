@@ -74,6 +74,12 @@ class ContactPlanes:
         return ContactPlanes(torch.cat([self.vertex, other.vertex]), torch.cat([self.point, other.point.to(self.point)]),
                              torch.cat([self.normal, other.normal.to(self.normal)]))
 
+    def to(self, device: torch.device | str) -> "ContactPlanes":
+        """The planes on ``device`` (itself when already there)."""
+        if self.vertex.device == torch.device(device):
+            return self
+        return ContactPlanes(self.vertex.to(device), self.point.to(device), self.normal.to(device))
+
     def project(self, positions: torch.Tensor) -> torch.Tensor:
         """(V,3) -> (V,3): each constrained vertex behind its plane moved onto it along the normal."""
         if not len(self.vertex):

@@ -22,8 +22,6 @@ device of the positions (one (V,3) copy each way per frame).
 from __future__ import annotations
 
 import numpy as np
-import scipy.sparse
-import scipy.sparse.linalg
 import torch
 
 from hyperbones.errors import ParameterError
@@ -42,6 +40,9 @@ class EdgeProjection:
 
     def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor, iterations: int = ITERATIONS,
                  anchor: float = ANCHOR, stretch: float = STRETCH_LIMIT, compression: float = COMPRESSION_LIMIT):
+        import scipy.sparse  # here, so that importing this module (for ITERATIONS) stays light
+        import scipy.sparse.linalg
+
         from hyperbones.physics.cloth import ClothRest
 
         if iterations < 1 or anchor <= 0:
@@ -67,8 +68,8 @@ class EdgeProjection:
         """(V,3) -> (V,3) after ``iterations`` local/global steps; ``contact`` (a
         ``ContactPlanes``) is enforced after each."""
         device, dtype = positions.device, positions.dtype
-        if contact is not None and contact.vertex.device.type != "cpu":
-            contact = type(contact)(contact.vertex.cpu(), contact.point.cpu().float(), contact.normal.cpu().float())
+        if contact is not None:
+            contact = contact.to("cpu")
         x = positions.detach().cpu().float().numpy()
         target = self.anchor * x
         for _ in range(self.iterations):

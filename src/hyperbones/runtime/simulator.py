@@ -28,14 +28,13 @@ from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_codes, correct_bones, heading_frame
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.identity import Identity
+from hyperbones.runtime.isometry import ITERATIONS as PROJECTION_ITERATIONS
+from hyperbones.runtime.isometry import EdgeProjection
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
 
-
-
-PROJECTION_ITERATIONS = 10  # of the edge projection after contact (runtime.isometry)
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -171,7 +170,6 @@ class Simulator:
         self.contact = None
         if body_faces is not None:
             from hyperbones.runtime.contact import BodyContact
-            from hyperbones.runtime.isometry import EdgeProjection
 
             projections = None
             if projection_iterations > 0:
