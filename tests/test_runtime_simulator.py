@@ -10,8 +10,9 @@ from hyperbones.errors import ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.models.hyperbones import HyperBonesModel
+from hyperbones.models.module_a import heading_frame
 from hyperbones.runtime.identity import encode_identity
-from hyperbones.runtime.simulator import Simulator
+from hyperbones.runtime.simulator import Simulator, transform_points
 
 from test_runtime_identity import SMALL
 
@@ -47,7 +48,8 @@ def _run(simulator, rotations, roots):
 def test_untrained_runtime_is_virtual_bone_skinning(setup, body):
     model, identities, motion = setup
     identity = identities[0]
-    out = _run(Simulator(model.runtime, [identity]), motion.joint_rotations[None], motion.root_translation[None])[0]
+    out = _run(Simulator(model.runtime, [identity], follow=1.0), motion.joint_rotations[None],
+               motion.root_translation[None])[0]
     posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
     rotations, positions = identity.bones.pose(posed.skinning_transforms)
     expected = linear_blend_skinning(identity.rest_vertices, identity.weights,
@@ -91,6 +93,26 @@ def test_reset_forgets_the_motion(setup):
     simulator.step(rotations[:, 11], roots[:, 11])
     simulator.reset()
     assert torch.equal(simulator.step(rotations[:, 10], roots[:, 10])[0], first)
+
+
+def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_it(setup):
+    model, identities, motion = setup
+    runtime = _trained_looking(model).runtime
+    rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
+    direct = Simulator(runtime, identities[:1], follow=1.0)
+    targets = _run(direct, rotations, roots)[0]  # (T,V,3)
+    follow = Simulator(runtime, identities[:1], follow=0.5)
+    outputs = _run(follow, rotations, roots)[0]
+    assert torch.equal(outputs[0], targets[0])  # the first frame has nothing to follow from
+    local = transform_points(heading_frame(rotations[0, :, 0], roots[0]), torch.stack([outputs, targets]))
+    # Each frame goes half the way from the last output to Module A's, both in that frame's heading frame.
+    assert torch.allclose(local[0, 1:], local[0, :-1] + 0.5 * (local[1, 1:] - local[0, :-1]), atol=1e-5)
+    assert float((outputs[-1] - targets[-1]).norm(dim=-1).max()) > 1e-3  # it lags a walking body
+    for _ in range(30):  # the body holds its last pose
+        held, settled = follow.step(rotations[:, -1], roots[:, -1])[0], direct.step(rotations[:, -1], roots[:, -1])[0]
+    assert float((held - settled).norm(dim=-1).max()) < 1e-5  # and settles where Module A is
+    with pytest.raises(ParameterError, match="follow"):
+        Simulator(runtime, identities[:1], follow=0.0)
 
 
 def test_bad_input(setup):

@@ -7,8 +7,16 @@ characters), one (V,B)@(B,12) garment skinning, two sparse products to and from 
 image and the Conv-MLP (batched). No state but the last K frames of bone positions, so
 it does not grow with the motion. Given the posed bodies, ``step`` also pushes garment
 vertices that end up inside a body back out and pulls the garment's edges back towards their
-rest lengths (``runtime.contact``, ``runtime.isometry``; on one CPU core ~45 ms of the 77 ms
-per frame of the 8k dress at 64²).
+rest lengths (``runtime.contact``, ``runtime.isometry``).
+
+Follow (``follow`` < 1): Module A's output is a target the garment moves towards, not where
+it is put: in each character's heading frame (origin at the Hips, turned with the
+character), the garment goes ``follow`` of the way from where the last frame left it to
+Module A's output, before contact and projection. The cloth then lags and settles as a
+damped first-order system with a time constant of (1 − follow)/follow frames relative to the
+body (translation and turning are carried at once), which cuts the frame-to-frame jerks
+Module A copies from the skeleton (the inertia energy), and starts the projection from the
+last isometric state. The state is one (V,3) array per character.
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
@@ -30,6 +38,8 @@ from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.identity import Identity
 from hyperbones.runtime.isometry import ITERATIONS as PROJECTION_ITERATIONS
 from hyperbones.runtime.isometry import EdgeProjection
+
+FOLLOW = 0.6  # the share of the way to Module A's output the garment goes each frame (1: none)
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
@@ -145,12 +155,17 @@ class Simulator:
     """
 
     def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu",
-                 body_faces: torch.Tensor | None = None, projection_iterations: int = PROJECTION_ITERATIONS):
+                 body_faces: torch.Tensor | None = None, projection_iterations: int = PROJECTION_ITERATIONS,
+                 follow: float = FOLLOW):
         """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
         them ``step`` can take the posed bodies and resolve contact, then pull the garment's
-        edges towards their rest lengths with ``projection_iterations`` (0: contact only)."""
+        edges towards their rest lengths with ``projection_iterations`` per contact round (0:
+        contact only). ``follow`` in (0, 1]: see the module's docstring (1: Module A's output
+        as it is)."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")
+        if not 0.0 < follow <= 1.0:
+            raise ParameterError(f"follow must be in (0, 1], got {follow}")
         bones = {identity.bones.num_bones for identity in identities}
         if bones != {module_a.config.num_bones}:
             raise ParameterError(f"identities have {sorted(bones)} virtual bones, the model expects "
@@ -167,6 +182,8 @@ class Simulator:
         self.bone_joint_weights = torch.stack([identity.bones.joint_weights.cpu() for identity in identities])
         self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
+        self.follow = follow
+        self.last_local: list[torch.Tensor] | None = None  # N (V_i,3): the last output, in its heading frame
         self.contact = None
         if body_faces is not None:
             from hyperbones.runtime.contact import BodyContact
@@ -180,7 +197,7 @@ class Simulator:
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
              uv_resolution: int | None = None, contact: bool = True,
-             projection_iterations: int = PROJECTION_ITERATIONS) -> "Simulator":
+             projection_iterations: int = PROJECTION_ITERATIONS, follow: float = FOLLOW) -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
         shipped one). ``contact``: ``step`` may then take the posed bodies (all characters
@@ -192,11 +209,12 @@ class Simulator:
             identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
                           for garment, body in characters]
         return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None,
-                   projection_iterations=projection_iterations)
+                   projection_iterations=projection_iterations, follow=follow)
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
         self.window = None
+        self.last_local = None
 
     @torch.no_grad()
     def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor,
@@ -225,6 +243,12 @@ class Simulator:
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
         garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
+        if self.follow < 1.0 and self.last_local is not None:
+            to_world = torch.linalg.inv(to_local)
+            garments = [transform_points(to_world[i], last + self.follow * (transform_points(to_local[i], target) - last))
+                        for i, (last, target) in enumerate(zip(self.last_local, garments))]
         if body_vertices is not None:
             garments = self.contact(garments, body_vertices.to(self.device))
+        if self.follow < 1.0:
+            self.last_local = [transform_points(to_local[i], garment) for i, garment in enumerate(garments)]
         return garments

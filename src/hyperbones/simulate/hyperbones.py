@@ -12,14 +12,15 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
-from hyperbones.runtime.simulator import Simulator
+from hyperbones.runtime.simulator import FOLLOW, Simulator
 from hyperbones.training.trainer import pick_device
 
 
 class HyperBonesMethod:
     """Garment positions from the per-frame runtime: Module B once, then Module A per frame,
-    with the garment pushed out of the body and its edges pulled back to length after each frame
-    (``contact``; off: Module A's output as it is, the method "hyperbones-raw")."""
+    with the garment following Module A's output, pushed out of the body and its edges pulled
+    back to length after each frame (``contact``; off: Module A's output as it is, the method
+    "hyperbones-raw")."""
 
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor | None = None,
                  material: Material | None = None, checkpoint: str | Path | None = None, device: str = "auto",
@@ -27,7 +28,8 @@ class HyperBonesMethod:
         self.device = pick_device(device)
         self.name = "hyperbones" if contact else "hyperbones-raw"
         garment = replace(garment, material=material or garment.material)
-        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact)
+        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact,
+                                        follow=FOLLOW if contact else 1.0)
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:
