@@ -68,3 +68,27 @@ def test_edge_projection_pulls_a_stretched_sheet_back_and_keeps_it_out_of_the_bo
     assert float(proximity.query(out, max_distance=0.1).signed_distance.min()) > 0.0
     with pytest.raises(ParameterError, match="edge projections"):
         BodyContact(faces, characters=2, projections=[projection])
+
+
+def test_skin_motion_is_how_far_the_skin_under_each_vertex_moved(body):
+    vertices, faces = body.rest_vertices, body.faces
+    proximity = BodyProximity(faces)
+    proximity.update(vertices)
+    torso = torch.nonzero((vertices[:, 2] > 1.0) & (vertices[:, 2] < 1.35) & (vertices[:, 0].abs() < 0.15)).squeeze(1)
+    near = vertices[torso[:50]] + 0.01 * proximity.query(vertices[torso[:50]], max_distance=0.1).normal
+    far = vertices[torso[:5]] + torch.tensor([0.0, -0.5, 0.0])  # half a metre in front: beyond every query
+    contact = BodyContact(faces, characters=1, margin=0.002)
+    assert contact.skin_motion(0, vertices) is None  # nothing found yet
+    contact([torch.cat([near, far])], vertices[None])
+    # The body bends: each vertex moves by an amount of its own, so the skin stretches too.
+    bent = vertices + torch.stack([0.05 * vertices[:, 2], 0.02 * vertices[:, 0], torch.zeros(len(vertices))], dim=1)
+    moved, distance = contact.skin_motion(0, bent)
+    nearest = proximity.query(near, max_distance=0.1)
+    corners = faces[nearest.face]
+    expected = ((bent[corners] - vertices[corners]) * nearest.barycentric[..., None]).sum(1)
+    assert torch.allclose(moved[:50], expected, atol=1e-5)
+    assert float(moved[:50].norm(dim=1).min()) > 0.04  # the torso moved some 5 cm sideways
+    assert torch.equal(moved[50:], torch.zeros(5, 3)) and bool(torch.isinf(distance[50:]).all())
+    assert torch.allclose(distance[:50], nearest.signed_distance, atol=1e-6)  # a centimetre or a little less
+    contact.forget()
+    assert contact.skin_motion(0, bent) is None

@@ -369,8 +369,9 @@ def build_parser() -> argparse.ArgumentParser:
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
     simulate.add_argument("--method", default="lbs",
                           help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet), "
-                               "hyperbones (the per-frame bone runtime, garment pushed out of the body and its "
-                               "edges pulled back to length each frame), hyperbones-raw (Module A alone) or "
+                               "hyperbones (the per-frame bone runtime: the garment follows Module A's output, is pushed "
+                               "out of the body and has its edges pulled back to length each frame), hyperbones-raw "
+                               "(Module A alone) or "
                                "physics (each frame's energy minimised by L-BFGS: slow, the teacher's reference)")
     simulate.add_argument("--checkpoint", default=None,
                           help="teacher or HyperBones checkpoint (default: the one shipped in the package)")
@@ -398,8 +399,8 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
                                 description="Writes DIR/report.md (a methods x garments table) and DIR/report.json.")
     evaluation.add_argument("--methods", default="lbs",
-                            help="comma list of methods: lbs, teacher, hyperbones, hyperbones-raw (no contact "
-                                 "or edge step), physics (default: lbs); physics minimises each frame's energy with "
+                            help="comma list of methods: lbs, teacher, hyperbones, hyperbones-raw (no follow, "
+                                 "contact or edge step), physics (default: lbs); physics minimises each frame's energy with "
                                  "L-BFGS, the teacher's slow reference")
     evaluation.add_argument("--checkpoint", default=None,
                             help="teacher or HyperBones checkpoint (default: the shipped ones; a HyperBones one "

@@ -57,6 +57,27 @@ class BodyContact:
         self.margin = margin
         self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
         self.projections = projections or [None] * characters
+        self.body_faces = body_faces.to(device=device, dtype=torch.int64)
+        # Per character, the last call's last query (``Nearest`` of each garment vertex) and body.
+        self.last_nearest: list = [None] * characters
+        self.last_bodies: list[torch.Tensor | None] = [None] * characters
+
+    def forget(self) -> None:
+        """Drop what the last call found (a new motion starts)."""
+        self.last_nearest = [None] * len(self.proximities)
+        self.last_bodies = [None] * len(self.proximities)
+
+    def skin_motion(self, character: int, body: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
+        """How the skin under ``character``'s garment moved from the last call's body to ``body``
+        (Vb,3): (V,3) the displacement of each vertex's nearest skin point at the last call (0
+        where none was found) and (V,) that call's signed distances (+inf where none was found);
+        None before a first call."""
+        nearest, last_body = self.last_nearest[character], self.last_bodies[character]
+        if nearest is None:
+            return None
+        corners = self.body_faces[nearest.face.clamp_min(0)]  # (V,3) body vertex indices
+        moved = ((body[corners] - last_body[corners]) * nearest.barycentric[..., None]).sum(1)
+        return moved * nearest.found[:, None], nearest.signed_distance
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
@@ -67,7 +88,8 @@ class BodyContact:
             raise ParameterError(f"contact needs one posed body per character ({len(self.proximities)}), "
                                  f"got {bodies.shape[0]}")
         out = []
-        for proximity, projection, garment, body in zip(self.proximities, self.projections, garments, bodies):
+        for index, (proximity, projection, garment, body) in enumerate(zip(self.proximities, self.projections,
+                                                                            garments, bodies)):
             proximity.update(body)
             garment, nearest = self._push_out(proximity, garment)
             for _ in range(PROJECTION_ROUNDS if projection is not None else 0):
@@ -76,6 +98,7 @@ class BodyContact:
                 # The projection moves vertices away from the skin planes too; what it moved
                 # inside comes out again.
                 garment, nearest = self._push_out(proximity, garment, ROUND_QUERY_DISTANCE)
+            self.last_nearest[index], self.last_bodies[index] = nearest, body
             out.append(garment)
         return out
 

@@ -33,6 +33,7 @@ import numpy as np
 import torch
 
 from hyperbones.errors import ParameterError
+from hyperbones.physics.contact import ContactPlanes
 
 ANCHOR = 0.005  # α: how strongly each vertex keeps to its input position, against an edge's weight 1
 ITERATIONS = 5  # local/global steps per call (the runtime calls it once per contact round)
@@ -81,12 +82,13 @@ class EdgeProjection:
         """(V,3) -> (V,3) after ``iterations`` local/global steps; ``contact`` (a
         ``ContactPlanes``) is enforced after each."""
         device, dtype = positions.device, positions.dtype
-        if contact is not None:
-            contact = contact.to("cpu")
         world = positions.detach().cpu().double()
         # Solved about the garment's centre: single precision keeps 10x more of a 10 cm
         # offset than of a 1 m position (a rigidly moved garment comes back within 1e-5 m).
         centre = world.mean(0)
+        if contact is not None:  # the planes, moved with the origin
+            contact = contact.to("cpu")
+            contact = ContactPlanes(contact.vertex, (contact.point.double() - centre).float(), contact.normal.float())
         x = (world - centre).float().numpy()
         target = self.anchor * x
         for _ in range(self.iterations):
@@ -95,5 +97,5 @@ class EdgeProjection:
             wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
             x = self.solve(self.gather @ wanted + target)
             if contact is not None:
-                x = (contact.project(torch.from_numpy(x).double() + centre) - centre).float().numpy()
+                x = contact.project(torch.from_numpy(x)).numpy()
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)

@@ -10,13 +10,17 @@ vertices that end up inside a body back out and pulls the garment's edges back t
 rest lengths (``runtime.contact``, ``runtime.isometry``).
 
 Follow (``follow`` < 1): Module A's output is a target the garment moves towards, not where
-it is put: in each character's heading frame (origin at the Hips, turned with the
-character), the garment goes ``follow`` of the way from where the last frame left it to
-Module A's output, before contact and projection. The cloth then lags and settles as a
-damped first-order system with a time constant of (1 − follow)/follow frames relative to the
-body (translation and turning are carried at once), which cuts the frame-to-frame jerks
-Module A copies from the skeleton (the inertia energy), and starts the projection from the
-last isometric state. The state is one (V,3) array per character.
+it is put. Each frame, the garment is first carried from where the last frame left it:
+loose cloth with the character (rigidly with its heading frame: origin at the Hips, turned
+with the character), cloth on the skin with the skin under it (the displacement of its
+nearest skin point), blended from one to the other between ``FOLLOW_FAR`` and
+``FOLLOW_NEAR`` from the skin. Each vertex then goes ``follow`` of the way from there to
+Module A's output, before contact and projection. The cloth lags and settles as a damped
+first-order system with a time constant of (1 − follow)/follow frames relative to what
+carries it, which cuts the frame-to-frame jerks Module A copies from the skeleton (the
+inertia energy) and starts the projection from the last, nearly isometric, state; cloth on a
+limb moves with the limb instead of being pushed through by it. The state is one (V,3)
+array per character.
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
@@ -40,6 +44,7 @@ from hyperbones.runtime.isometry import ITERATIONS as PROJECTION_ITERATIONS
 from hyperbones.runtime.isometry import EdgeProjection
 
 FOLLOW = 0.6  # the share of the way to Module A's output the garment goes each frame (1: none)
+FOLLOW_NEAR, FOLLOW_FAR = 0.01, 0.04  # m from the skin: cloth nearer is carried by the skin, farther by the character
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
@@ -183,7 +188,8 @@ class Simulator:
         self.bone_rest = torch.stack([identity.bones.rest_positions.cpu() for identity in identities])  # (N,B,3)
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
         self.follow = follow
-        self.last_local: list[torch.Tensor] | None = None  # N (V_i,3): the last output, in its heading frame
+        self.last_output: list[torch.Tensor] | None = None  # N (V_i,3): the last output (world)
+        self.last_local: list[torch.Tensor] | None = None  # and in the heading frame of its frame
         self.contact = None
         if body_faces is not None:
             from hyperbones.runtime.contact import BodyContact
@@ -211,10 +217,23 @@ class Simulator:
         return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None,
                    projection_iterations=projection_iterations, follow=follow)
 
+    def _carried(self, character: int, to_world: torch.Tensor, body: torch.Tensor | None) -> torch.Tensor:
+        """(V,3) world positions of ``character``'s last output carried to this frame (see the
+        module's docstring); to_world: (4,4) this frame's heading frame; body: (Vb,3) or None."""
+        carried = transform_points(to_world, self.last_local[character])
+        skin = self.contact.skin_motion(character, body) if body is not None else None
+        if skin is None:
+            return carried
+        moved, distance = skin
+        on_skin = 1.0 - ((distance - FOLLOW_NEAR) / (FOLLOW_FAR - FOLLOW_NEAR)).clamp(0.0, 1.0)  # (V,)
+        return carried + on_skin[:, None] * (self.last_output[character] + moved - carried)
+
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
         self.window = None
-        self.last_local = None
+        self.last_output = self.last_local = None
+        if self.contact is not None:
+            self.contact.forget()
 
     @torch.no_grad()
     def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor,
@@ -243,12 +262,15 @@ class Simulator:
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
         garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
+        bodies = body_vertices.to(self.device) if body_vertices is not None else None
         if self.follow < 1.0 and self.last_local is not None:
             to_world = torch.linalg.inv(to_local)
-            garments = [transform_points(to_world[i], last + self.follow * (transform_points(to_local[i], target) - last))
-                        for i, (last, target) in enumerate(zip(self.last_local, garments))]
-        if body_vertices is not None:
-            garments = self.contact(garments, body_vertices.to(self.device))
+            carried = [self._carried(i, to_world[i], bodies[i] if bodies is not None else None)
+                       for i in range(count)]
+            garments = [start + self.follow * (target - start) for start, target in zip(carried, garments)]
+        if bodies is not None:
+            garments = self.contact(garments, bodies)
         if self.follow < 1.0:
+            self.last_output = garments
             self.last_local = [transform_points(to_local[i], garment) for i, garment in enumerate(garments)]
         return garments
