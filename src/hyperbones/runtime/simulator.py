@@ -20,7 +20,10 @@ first-order system with a time constant of (1 − follow)/follow frames relative
 carries it, which cuts the frame-to-frame jerks Module A copies from the skeleton (the
 inertia energy) and starts the projection from the last, nearly isometric, state; cloth on a
 limb moves with the limb instead of being pushed through by it. The state is one (V,3)
-array per character.
+array per character. ``FOLLOW`` = 0.6 against 0.5 and 0.75, on training clips with unseen
+bodies (16_07, 02_03 × two eval body shapes; mean ε_e / ε_a over dress, long-skirt, tshirt,
+pants): 3.47 / 3.97 % against 3.47 / 4.02 (0.5: better on the tshirt, worse on the pants)
+and 3.60 / 4.05 (0.75).
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
