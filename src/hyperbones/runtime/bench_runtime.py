@@ -1,4 +1,5 @@
-"""``hyperbones bench-runtime``: the per-frame runtime alone, on saved identity caches.
+"""``hyperbones bench-runtime``: the per-frame runtime alone, on saved identity caches (Module A
+and the follow in the heading frame; no body, so no contact or edge projection).
 
 Needs only Module A, identity caches (``Identity.save``) and a motion ``.npz`` (``hyperbones
 motion NAME --out FILE``): no body model, teacher or Warp, so it runs wherever torch does
