@@ -59,7 +59,6 @@ class BodyContact:
         self.margin = margin
         self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
         self.projections = projections or [None] * characters
-        self.body_faces = body_faces.to(device=device, dtype=torch.int64)
         # Per character, the last call's last query (``Nearest`` of each garment vertex) and body.
         self.last_nearest: list = [None] * characters
         self.last_bodies: list[torch.Tensor | None] = [None] * characters
@@ -77,9 +76,11 @@ class BodyContact:
         nearest, last_body = self.last_nearest[character], self.last_bodies[character]
         if nearest is None:
             return None
-        corners = self.body_faces[nearest.face.clamp_min(0)]  # (V,3) body vertex indices
-        moved = ((body[corners] - last_body[corners]) * nearest.barycentric[..., None]).sum(1)
-        return moved * nearest.found[:, None], nearest.signed_distance
+        from hyperbones.geometry.proximity import surface_points
+
+        now, before = surface_points(torch.stack([body, last_body]), self.proximities[character].faces,
+                                     nearest.face, nearest.barycentric)
+        return (now - before) * nearest.found[:, None], nearest.signed_distance
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments

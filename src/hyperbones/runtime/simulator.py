@@ -192,7 +192,7 @@ class Simulator:
         self.window: torch.Tensor | None = None  # (N,K,B,3) world bone positions
         self.follow = follow
         self.last_output: list[torch.Tensor] | None = None  # N (V_i,3): the last output (world)
-        self.last_local: list[torch.Tensor] | None = None  # and in the heading frame of its frame
+        self.last_to_local: torch.Tensor | None = None  # (N,4,4): its frame's world -> heading frame
         self.contact = None
         if body_faces is not None:
             from hyperbones.runtime.contact import BodyContact
@@ -222,8 +222,8 @@ class Simulator:
 
     def _carried(self, character: int, to_world: torch.Tensor, body: torch.Tensor | None) -> torch.Tensor:
         """(V,3) world positions of ``character``'s last output carried to this frame (see the
-        module's docstring); to_world: (4,4) this frame's heading frame; body: (Vb,3) or None."""
-        carried = transform_points(to_world, self.last_local[character])
+        module's docstring); to_world: (4,4) this frame's heading frame -> world; body: (Vb,3) or None."""
+        carried = transform_points(to_world @ self.last_to_local[character], self.last_output[character])
         skin = self.contact.skin_motion(character, body) if body is not None else None
         if skin is None:
             return carried
@@ -234,7 +234,7 @@ class Simulator:
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
         self.window = None
-        self.last_output = self.last_local = None
+        self.last_output = self.last_to_local = None
         if self.contact is not None:
             self.contact.forget()
 
@@ -266,7 +266,7 @@ class Simulator:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
         garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
         bodies = body_vertices.to(self.device) if body_vertices is not None else None
-        if self.follow < 1.0 and self.last_local is not None:
+        if self.follow < 1.0 and self.last_output is not None:
             to_world = torch.linalg.inv(to_local)
             carried = [self._carried(i, to_world[i], bodies[i] if bodies is not None else None)
                        for i in range(count)]
@@ -274,6 +274,5 @@ class Simulator:
         if bodies is not None:
             garments = self.contact(garments, bodies)
         if self.follow < 1.0:
-            self.last_output = garments
-            self.last_local = [transform_points(to_local[i], garment) for i, garment in enumerate(garments)]
+            self.last_output, self.last_to_local = garments, to_local
         return garments
