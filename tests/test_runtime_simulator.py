@@ -101,7 +101,7 @@ def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_i
     rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
     direct = Simulator(runtime, identities[:1], follow=1.0)
     targets = _run(direct, rotations, roots)[0]  # (T,V,3)
-    follow = Simulator(runtime, identities[:1], follow=0.5)
+    follow = Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.0)
     outputs = _run(follow, rotations, roots)[0]
     assert torch.equal(outputs[0], targets[0])  # the first frame has nothing to follow from
     local = transform_points(heading_frame(rotations[0, :, 0], roots[0]), torch.stack([outputs, targets]))
@@ -113,6 +113,50 @@ def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_i
     assert float((held - settled).norm(dim=-1).max()) < 1e-5  # and settles where Module A is
     with pytest.raises(ParameterError, match="follow"):
         Simulator(runtime, identities[:1], follow=0.0)
+    with pytest.raises(ParameterError, match="loose_follow"):
+        Simulator(runtime, identities[:1], loose_follow=1.5)
+    with pytest.raises(ParameterError, match="carry_lag"):
+        Simulator(runtime, identities[:1], carry_lag=1.0)
+
+
+def test_carry_lag_carries_by_a_blend_of_this_and_the_last_frame_to_frame_motion(setup):
+    model, identities, motion = setup
+    runtime = _trained_looking(model).runtime
+    rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
+    targets = _run(Simulator(runtime, identities[:1], follow=1.0, loose_follow=1.0), rotations, roots)[0]
+    outputs = _run(Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.25), rotations, roots)[0]
+    heading = heading_frame(rotations[0, :, 0], roots[0])  # (T,4,4) world -> heading frame
+    moves = torch.linalg.inv(heading[1:]) @ heading[:-1]  # (T-1,4,4): frame t-1 -> t
+    expected = [targets[0], targets[1] + 0.5 * (transform_points(moves[0], targets[0]) - targets[1])]
+    for t in range(2, len(targets)):
+        carried = transform_points(moves[t - 1] + 0.25 * (moves[t - 2] - moves[t - 1]), expected[-1])
+        expected.append(carried + 0.5 * (targets[t] - carried))
+    assert torch.allclose(outputs, torch.stack(expected), atol=1e-5)
+    assert float((outputs - _run(Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.0), rotations,
+                                 roots)[0]).norm(dim=-1).max()) > 1e-4  # the lag made a difference
+
+
+def test_loose_cloth_lags_by_its_own_share_after_the_body_stops(setup, body):
+    """The long skirt's hem is loose cloth: with a smaller ``loose_follow`` it is still further
+    from where it settles a few frames after the stop, and it does settle there."""
+    model, identities, motion = setup
+    runtime = _trained_looking(model).runtime
+    frames = 12
+    posed = body.pose(motion.joint_rotations[:frames], motion.root_translation[:frames])
+    rotations, roots = motion.joint_rotations[None, :frames], motion.root_translation[None, :frames]
+    skirt = identities[1]
+    hem = torch.argsort(skirt.rest_vertices[:, 2])[: len(skirt.rest_vertices) // 20]
+
+    def hem_after_stop(loose_follow):
+        simulator = Simulator(runtime, [skirt], body_faces=body.faces, follow=0.6, loose_follow=loose_follow)
+        for t in range(frames):
+            simulator.step(rotations[:, t], roots[:, t], posed.vertices[None, t])
+        held = [simulator.step(rotations[:, -1], roots[:, -1], posed.vertices[None, -1])[0][hem] for _ in range(40)]
+        return [float((positions - held[-1]).norm(dim=-1).mean()) for positions in held]
+
+    even, loose = hem_after_stop(0.6), hem_after_stop(0.2)
+    assert loose[2] > 1.5 * even[2] and loose[2] > 1e-3
+    assert loose[-2] < 0.02 * loose[2]  # and settles
 
 
 def test_bad_input(setup):

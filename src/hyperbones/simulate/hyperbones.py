@@ -12,7 +12,7 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
-from hyperbones.runtime.simulator import FOLLOW, Simulator
+from hyperbones.runtime.simulator import FOLLOW, LOOSE_FOLLOW, Simulator
 from hyperbones.training.trainer import pick_device
 
 
@@ -29,7 +29,8 @@ class HyperBonesMethod:
         self.name = "hyperbones" if contact else "hyperbones-raw"
         garment = replace(garment, material=material or garment.material)
         self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact,
-                                        follow=FOLLOW if contact else 1.0)
+                                        follow=FOLLOW if contact else 1.0,
+                                        loose_follow=LOOSE_FOLLOW if contact else 1.0)
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:
