@@ -21,7 +21,8 @@ cloth lags and settles as a damped first-order system with a time constant of
 (1 − share)/share frames relative to what carries it, which cuts the frame-to-frame jerks
 Module A copies from the skeleton (the inertia energy) and starts the projection from the
 last, nearly isometric, state; cloth on a limb moves with the limb instead of being pushed
-through by it, loose cloth lags longer and swings on after the body stops.
+through by it, loose cloth lags longer and settles later after the body stops (it decays, it
+does not oscillate).
 
 What carries loose cloth is not the character's motion since the last frame but its blend
 with the motion the frame before (``carry_lag`` of the latter; a linear blend of two
@@ -48,7 +49,7 @@ body, dress / long-skirt inertia for carry_lag 0, 0.3, 0.5, 0.7: 6.97 / 8.89, 6.
 
 (``follow`` 0.5 and 0.75 with equal shares: ε_e / ε_a 3.47 / 4.02 and 3.60 / 4.05.) Keeping
 part of each vertex's last frame-to-frame motion (a second-order follow, 0.9 of it with
-loose_follow 0.2) swings the hem on for 0.37 s too (ε_e / ε_a 3.29 / 3.80), but lifts the
+loose_follow 0.2) keeps the hem moving for 0.37 s too (ε_e / ε_a 3.29 / 3.80), but lifts the
 dress's and long skirt's inertia above LBS's (LBS ÷ ours 0.93 and 0.87).
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
@@ -73,7 +74,7 @@ from hyperbones.runtime.isometry import ITERATIONS as PROJECTION_ITERATIONS
 from hyperbones.runtime.isometry import EdgeProjection
 
 FOLLOW = 0.6  # the share of the way to Module A's output the garment goes each frame (1: none)
-LOOSE_FOLLOW = 0.4  # the same for loose cloth (FOLLOW_FAR or more from the skin): it lags and swings on longer
+LOOSE_FOLLOW = 0.4  # the same for loose cloth (FOLLOW_FAR or more from the skin): it lags and settles later
 CARRY_LAG = 0.5  # the share of the character's last-but-one frame-to-frame motion in what carries loose cloth
 FOLLOW_NEAR, FOLLOW_FAR = 0.01, 0.04  # m from the skin: cloth nearer is carried by the skin, farther by the character
 
