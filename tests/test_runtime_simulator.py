@@ -48,7 +48,7 @@ def _run(simulator, rotations, roots):
 def test_untrained_runtime_is_virtual_bone_skinning(setup, body):
     model, identities, motion = setup
     identity = identities[0]
-    out = _run(Simulator(model.runtime, [identity], follow=1.0), motion.joint_rotations[None],
+    out = _run(Simulator(model.runtime, [identity], follow=1.0, loose_follow=1.0), motion.joint_rotations[None],
                motion.root_translation[None])[0]
     posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
     rotations, positions = identity.bones.pose(posed.skinning_transforms)
@@ -99,7 +99,7 @@ def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_i
     model, identities, motion = setup
     runtime = _trained_looking(model).runtime
     rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
-    direct = Simulator(runtime, identities[:1], follow=1.0)
+    direct = Simulator(runtime, identities[:1], follow=1.0, loose_follow=1.0)
     targets = _run(direct, rotations, roots)[0]  # (T,V,3)
     follow = Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.0)
     outputs = _run(follow, rotations, roots)[0]
