@@ -59,28 +59,26 @@ class BodyContact:
         self.margin = margin
         self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
         self.projections = projections or [None] * characters
-        # Per character, the last call's last query (``Nearest`` of each garment vertex) and body.
+        # Per character, the last call's last query (``Nearest`` of each garment vertex; its
+        # points lie on that call's body).
         self.last_nearest: list = [None] * characters
-        self.last_bodies: list[torch.Tensor | None] = [None] * characters
 
     def forget(self) -> None:
         """Drop what the last call found (a new motion starts)."""
         self.last_nearest = [None] * len(self.proximities)
-        self.last_bodies = [None] * len(self.proximities)
 
     def skin_motion(self, character: int, body: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
         """How the skin under ``character``'s garment moved from the last call's body to ``body``
         (Vb,3): (V,3) the displacement of each vertex's nearest skin point at the last call (0
         where none was found) and (V,) that call's signed distances (+inf where none was found);
         None before a first call."""
-        nearest, last_body = self.last_nearest[character], self.last_bodies[character]
+        nearest = self.last_nearest[character]
         if nearest is None:
             return None
         from hyperbones.geometry.proximity import surface_points
 
-        now, before = surface_points(torch.stack([body, last_body]), self.proximities[character].faces,
-                                     nearest.face, nearest.barycentric)
-        return (now - before) * nearest.found[:, None], nearest.signed_distance
+        now = surface_points(body, self.proximities[character].faces, nearest.face, nearest.barycentric)
+        return (now - nearest.point) * nearest.found[:, None], nearest.signed_distance
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
@@ -101,7 +99,7 @@ class BodyContact:
                 # The projection moves vertices away from the skin planes too; what it moved
                 # inside comes out again.
                 garment, nearest = self._push_out(proximity, garment, ROUND_QUERY_DISTANCE)
-            self.last_nearest[index], self.last_bodies[index] = nearest, body
+            self.last_nearest[index] = nearest
             out.append(garment)
         return out
 
