@@ -1,5 +1,6 @@
 """The command line: output contracts, one-line errors, render and demo."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -99,14 +100,22 @@ def test_render_writes_video_and_sheet(tmp_path, capsys):
 
 
 def test_demo_and_console_script(tmp_path):
-    """The README's main job, through the installed console script."""
+    """The README's main job, through the installed console script: the shipped model moves
+    the dress with the walking body."""
     exe = Path(sys.executable).with_name("hyperbones")
-    result = subprocess.run([str(exe), "demo", "--quiet", "--out", str(tmp_path / "demo")],
+    result = subprocess.run([str(exe), "demo", "--quiet", "--device", "cpu", "--out", str(tmp_path / "demo")],
                             capture_output=True, text=True, timeout=600)
     assert result.returncode == 0, result.stderr
     for name in ("preview.mp4", "preview_sheet.png", "frames.npz", "garment.pc2", "scene.usd", "metrics.json"):
         assert (tmp_path / "demo" / name).stat().st_size > 100
     assert "preview.mp4" in result.stdout
+    metrics = json.loads((tmp_path / "demo" / "metrics.json").read_text())
+    assert metrics["method"] == "hyperbones" and metrics["garment"] == "dress"
+    assert metrics["edge_error_pct"] < 5.0 and metrics["collision_pct"] < 0.5
+    frames = np.load(tmp_path / "demo" / "frames.npz")
+    garment, root = frames["garment_vertices"].mean(axis=1), frames["joint_positions"][:, 0]
+    assert np.linalg.norm(root[-1] - root[0]) > 1.0  # the body walks a metre or more...
+    assert np.linalg.norm(garment - root, axis=1).max() < 0.4  # ...and the dress goes with it
 
 
 def test_help_explains_commands(capsys):

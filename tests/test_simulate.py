@@ -59,7 +59,7 @@ def test_simulate_command_exports_read_back(tmp_path, capsys):
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Root/garment"))
     assert np.allclose(np.array(mesh.GetPointsAttr().Get(7)), garment[7], atol=1e-6)
     metrics = json.loads((out / "metrics.json").read_text())
-    assert METRIC_KEYS <= set(metrics) and metrics["frames"] == 20 and metrics["method"] == "lbs"
+    assert METRIC_KEYS <= set(metrics) and metrics["frames"] == 20 and metrics["method"] == "hyperbones"
     assert (out / "preview.mp4").stat().st_size > 1000 and (out / "preview_sheet.png").exists()
     assert len(list((out / "obj").glob("garment_*.obj"))) == 20
     assert "ms/frame" in capsys.readouterr().out

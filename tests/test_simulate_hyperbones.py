@@ -80,3 +80,22 @@ def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path):
                  "--device", "cpu", "--out", str(out), "--quiet"]) == 0
     methods = [run["method"] for run in json.loads((out / "report.json").read_text())]
     assert methods == ["lbs", "hyperbones-raw"]
+
+
+def test_the_shipped_model_loads_safely_and_beats_lbs_on_a_walk():
+    """The package's trained model: small enough to ship, loadable without pickled code, the
+    default of --method hyperbones, and better than skinning where the issue asks it to be."""
+    from hyperbones.runtime.simulator import hyperbones_payload, load_module_a
+    from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
+
+    shipped = sum(path.stat().st_size for path in SHIPPED_HYPERBONES.parent.glob("*.pt"))
+    assert shipped < 30e6
+    payload = load_checkpoint(SHIPPED_HYPERBONES)  # torch.load(weights_only=True)
+    assert payload["step"] > 0 and set(payload) == {"model", "config", "step"}
+    assert hyperbones_payload()["config"]["runtime"]["num_bones"] == payload["config"]["runtime"]["num_bones"]
+    assert not load_module_a().training
+    ours = run_simulation("hyperbones", "dress", "walk", vertices=1500, frames=90, device="cpu")
+    lbs = run_simulation("lbs", "dress", "walk", vertices=1500, frames=90)
+    for metric in ("edge_error_pct", "area_error_pct", "collision_pct"):
+        assert ours.metrics[metric] < 0.5 * lbs.metrics[metric], metric
+    assert ours.metrics["inertia"] < lbs.metrics["inertia"]

@@ -75,6 +75,16 @@ def test_zbuffer_keeps_nearer_triangle_in_either_order():
         assert image[far_only][2] > 60 and image[far_only][0] == 0
 
 
+def test_depth_offset_draws_cloth_over_skin_it_dips_under_by_less():
+    """A garment triangle 2 mm behind the skin is hidden, and drawn with a 3 mm offset."""
+    skin = MeshSequence(_triangle(0.0, half=0.8), [[0, 1, 2]], (1.0, 0.0, 0.0), "skin")
+    centre = _pixel((0.0, 0.0, 0.9))
+    for offset, shown in ((0.0, False), (0.003, True)):
+        cloth = MeshSequence(_triangle(0.002), [[0, 1, 2]], (0.0, 0.0, 1.0), "cloth", depth_offset=offset)
+        image = render_frame([skin, cloth], 0, FRONT, SIZE, ground=False)
+        assert (image[centre][2] > 60) == shown and (image[centre][0] > 60) != shown
+
+
 def test_offscreen_and_degenerate_triangles_are_safe():
     # Far larger than the view: every pixel is covered, nothing indexes out of bounds.
     huge = MeshSequence(_triangle(0.0, half=50.0), [[0, 1, 2]], (0.0, 1.0, 0.0), "huge")

@@ -86,13 +86,18 @@ def _print_run(result, paths: dict) -> None:
         print(f"  {kind:8s} {Path(path).resolve()}")
 
 
+DEMO_VERTICES = 2500  # the dress at the shipped model's larger training resolution
+
+
 def cmd_demo(args) -> int:
     from hyperbones.simulate.pipeline import export_simulation, run_simulation
 
     start = time.perf_counter()
-    print("hyperbones demo: the default dress on the default Anny body, walking, simulated with the LBS baseline\n"
-          "(the first run on a machine builds Anny's cache and drapes the dress: about a minute)")
-    result = run_simulation("lbs", "dress", "walk", None, hold=1.0)
+    print("hyperbones demo: the default dress on the default Anny body, walking, then standing still for 1 s,\n"
+          "simulated by the shipped HyperBones model (Module B once, then Module A every frame)\n"
+          "(the first run on a machine builds Anny's cache and drapes the dress: about a minute)", flush=True)
+    result = run_simulation("hyperbones", "dress", "walk", None, vertices=DEMO_VERTICES, hold=1.0,
+                            device=args.device, progress=not args.quiet)
     paths = export_simulation(result, Path(args.out).resolve(), progress=not args.quiet)
     print(f"done in {time.perf_counter() - start:.1f} s")
     _print_run(result, paths)
@@ -205,7 +210,7 @@ def cmd_train(args) -> int:
     return 0
 
 
-def cmd_export_teacher(args) -> int:
+def cmd_export(args) -> int:
     from hyperbones.training.checkpoint import export_weights
 
     path = export_weights(args.checkpoint, args.out)
@@ -339,8 +344,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
-    demo = sub.add_parser("demo", help="run the main job on built-in data and write its outputs")
+    demo = sub.add_parser("demo", help="simulate the default dress with the shipped model and write every output",
+                          description="The default dress (2,500 vertices) on the default Anny body walking, then "
+                                      "still for 1 s, simulated by the shipped HyperBones model. Writes "
+                                      "preview.mp4 + preview_sheet.png, scene.usd, garment.pc2, frames.npz and "
+                                      "metrics.json into --out and prints their paths.")
     demo.add_argument("--out", default="hyperbones-demo", help="output folder (default: ./hyperbones-demo)")
+    demo.add_argument("--device", default="auto", help="cpu, cuda or auto (default: CUDA when present)")
     demo.add_argument("--quiet", action="store_true", help="no progress bars")
     demo.set_defaults(func=cmd_demo)
 
@@ -367,10 +377,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and metrics.json.")
-    simulate.add_argument("--method", default="lbs",
-                          help="lbs (default: skinning, no dynamics), teacher (the physics-trained MeshGraphNet), "
-                               "hyperbones (the per-frame bone runtime: the garment follows Module A's output, is pushed "
-                               "out of the body and has its edges pulled back to length each frame), hyperbones-raw "
+    simulate.add_argument("--method", default="hyperbones",
+                          help="hyperbones (default: the shipped model's per-frame bone runtime: the garment follows "
+                               "Module A's output, is pushed out of the body and has its edges pulled back to length "
+                               "each frame), lbs (skinning, no dynamics), teacher (the physics-trained MeshGraphNet), "
+                               "hyperbones-raw "
                                "(Module A alone) or "
                                "physics (each frame's energy minimised by L-BFGS: slow, the teacher's reference)")
     simulate.add_argument("--checkpoint", default=None,
@@ -434,10 +445,14 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--quiet", action="store_true", help="no progress bar")
     train.set_defaults(func=cmd_train)
 
-    export = sub.add_parser("export-teacher", help="keep only what inference needs from a training checkpoint")
+    export = sub.add_parser("export", aliases=["export-teacher"],
+                            help="keep only what inference needs from a training checkpoint (teacher or HyperBones)",
+                            description="Writes OUT (the weights' moving average + config + step; loads with "
+                                        "weights_only) and OUT with .md: the config, training wall time and a "
+                                        "summary of the run's TensorBoard log up to the checkpoint's step.")
     export.add_argument("checkpoint", help="a run's checkpoint.pt")
     export.add_argument("--out", required=True, help="output .pt (model weights + config)")
-    export.set_defaults(func=cmd_export_teacher)
+    export.set_defaults(func=cmd_export)
 
     bench = sub.add_parser("bench", help="median ms per frame of each method on each garment",
                            description="Times each method frame by frame on the default body walking, after a warm-up "

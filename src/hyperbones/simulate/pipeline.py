@@ -56,6 +56,7 @@ METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones, "hy
 """Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
 the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)
+GARMENT_DEPTH_OFFSET = 0.003  # m: the preview draws cloth on the skin over it (viz.preview.MeshSequence)
 
 
 @dataclass
@@ -144,7 +145,8 @@ def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bo
         title = f"{m['method']} | {m['garment']} | {m['motion']} | body {m['body']}"
         video, sheet = render_preview(
             [MeshSequence(result.body_vertices.numpy(), result.body_faces.numpy(), BODY_COLOR, "body"),
-             MeshSequence(result.garment_vertices.numpy(), garment.faces.numpy(), GARMENT_COLOR, "garment")],
+             MeshSequence(result.garment_vertices.numpy(), garment.faces.numpy(), GARMENT_COLOR, "garment",
+                          depth_offset=GARMENT_DEPTH_OFFSET)],
             out / "preview.mp4", result.fps, title=title, progress=progress)
         paths.update(preview=video, sheet=sheet)
     if obj:

@@ -83,21 +83,26 @@ def load_optimizer_state(path: str | Path, payload: dict, map_location: str | to
 
 def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
     """Write the inference part of a training checkpoint (the weights' moving average when it
-    keeps one, else the model; config, step) to ``out``, and
-    beside it ``<out>.md``: the config and a summary of the run's TensorBoard log when the
-    checkpoint's folder has one."""
-    from hyperbones.training.summary import training_summary
+    keeps one, else the model; config, step) to ``out``, and beside it ``<out>.md``: the
+    config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
+    and a summary of the log, both up to the checkpoint's step."""
+    from hyperbones.training.summary import training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
     slim = {"model": payload.get("ema") or payload["model"], "config": payload["config"], "step": payload["step"]}
     out = save_checkpoint(out, slim)
     log_dir = Path(checkpoint).parent / "tensorboard"
-    summary = training_summary(log_dir) if log_dir.exists() else "(no TensorBoard log beside the checkpoint)"
+    if log_dir.exists():
+        hours = training_seconds(log_dir, up_to=payload["step"]) / 3600
+        log = (f"Training took {hours:.1f} h of wall-clock time to this step (the gaps between logged steps; "
+               f"pauses over 10 minutes left out).\n\nTraining log (medians per stretch of steps):\n\n"
+               f"{training_summary(log_dir, up_to=payload['step'])}\n")
+    else:
+        log = "(no TensorBoard log beside the checkpoint)\n"
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
     with atomic_path(out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
-                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n"
-                       f"Training log (medians per stretch of steps):\n\n{summary}\n")
+                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{log}")
     return out
 
 

@@ -36,6 +36,9 @@ class MeshSequence:
     vertices: (T, V, 3) world positions in metres (Z up) for T frames;
     faces: (F, 3) vertex indices; color: (3,) RGB in [0, 1];
     smooth: interpolate per-vertex normals (True) or shade each face flat.
+    depth_offset: metres this mesh is moved towards the camera in the depth test only (a
+    polygon offset): cloth resting on skin wins where its flat triangles, spanning vertices
+    that are all outside the skin, dip under the curved skin between them.
     Arrays are converted to float32 / int32 so the compiled kernels see one type.
     """
 
@@ -44,6 +47,7 @@ class MeshSequence:
     color: np.ndarray = (0.75, 0.75, 0.75)
     name: str = "mesh"
     smooth: bool = True
+    depth_offset: float = 0.0
 
     def __post_init__(self) -> None:
         vertices = np.asarray(self.vertices)
@@ -138,6 +142,8 @@ def render_frame(
         verts = m.vertices[frame_index]
         vertex_shade, face_shade = shade_mesh(verts, m.faces, light, AMBIENT)
         xy, depth = project(camera, verts, size, size)
+        if m.depth_offset:
+            depth = depth - m.depth_offset
         rasterize(xy, depth, vertex_shade, face_shade, m.faces, m.color, m.smooth, camera.near, rgb, zbuf)
     return rgb
 
