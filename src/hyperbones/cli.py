@@ -95,7 +95,7 @@ def cmd_demo(args) -> int:
     start = time.perf_counter()
     print("hyperbones demo: the default dress on the default Anny body, walking, then standing still for 1 s,\n"
           "simulated by the shipped HyperBones model (Module B once, then Module A every frame)\n"
-          "(the first run on a machine builds Anny's cache and drapes the dress: about a minute)", flush=True)
+          "(the first run on a machine builds Anny's cache and drapes the dress: about a minute more)", flush=True)
     result = run_simulation("hyperbones", "dress", "walk", None, vertices=DEMO_VERTICES, hold=1.0,
                             device=args.device, progress=not args.quiet)
     paths = export_simulation(result, Path(args.out).resolve(), progress=not args.quiet)
