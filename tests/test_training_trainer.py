@@ -106,10 +106,10 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
     card = (tmp_path / "teacher.md").read_text()
     assert "Step 4," in card and "h of wall-clock time" in card and "| 1–" in card
     # The log summary stops at the step asked for, though the log goes on.
-    from hyperbones.training.summary import read_scalars, training_summary
+    from hyperbones.training.summary import read_log, training_summary
 
-    log = tmp_path / "run" / "tensorboard"
-    first = min(step for step, _ in read_scalars(log)["loss"])
+    log = read_log(tmp_path / "run" / "tensorboard")
+    first = min(step for step, _, _ in log["loss"])
     assert training_summary(log, rows=1, up_to=first).splitlines()[-1].startswith(f"| 1–{first} |")
     assert training_summary(log, up_to=first - 1) == "(no training steps logged)"
 

@@ -86,23 +86,24 @@ def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
     keeps one, else the model; config, step) to ``out``, and beside it ``<out>.md``: the
     config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
     and a summary of the log, both up to the checkpoint's step."""
-    from hyperbones.training.summary import training_seconds, training_summary
+    from hyperbones.training.summary import read_log, training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
     slim = {"model": payload.get("ema") or payload["model"], "config": payload["config"], "step": payload["step"]}
     out = save_checkpoint(out, slim)
     log_dir = Path(checkpoint).parent / "tensorboard"
     if log_dir.exists():
-        hours = training_seconds(log_dir, up_to=payload["step"]) / 3600
-        log = (f"Training took {hours:.1f} h of wall-clock time to this step (the gaps between logged steps; "
-               f"pauses over 10 minutes left out).\n\nTraining log (medians per stretch of steps):\n\n"
-               f"{training_summary(log_dir, up_to=payload['step'])}\n")
+        log = read_log(log_dir)
+        hours = training_seconds(log, up_to=payload["step"]) / 3600
+        text = (f"Training took {hours:.1f} h of wall-clock time to this step (the gaps between logged steps; "
+                f"pauses over 10 minutes left out).\n\nTraining log (medians per stretch of steps):\n\n"
+                f"{training_summary(log, up_to=payload['step'])}\n")
     else:
-        log = "(no TensorBoard log beside the checkpoint)\n"
+        text = "(no TensorBoard log beside the checkpoint)\n"
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
     with atomic_path(out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
-                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{log}")
+                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{text}")
     return out
 
 

@@ -10,8 +10,9 @@ TERMS = ("loss", "stretching", "bending", "gravity", "inertia", "collision", "fr
          "grad_norm", "collision_weight", "rollout", "learning_rate", "steps_per_second")
 
 
-def read_scalars(log_dir: str | Path) -> dict[str, list[tuple[int, float]]]:
-    """{tag without the "train/" prefix: [(step, value), ...]} from every event file under ``log_dir``."""
+def read_log(log_dir: str | Path) -> dict[str, list[tuple[int, float, float]]]:
+    """{tag without the "train/" prefix: [(step, wall time s, value), ...]} from every event
+    file under ``log_dir`` (read once; ``training_summary`` and ``training_seconds`` take it)."""
     import logging
 
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
@@ -21,18 +22,16 @@ def read_scalars(log_dir: str | Path) -> dict[str, list[tuple[int, float]]]:
     logging.getLogger("tensorboard").setLevel(logging.ERROR)
     accumulator = EventAccumulator(str(log_dir), size_guidance={"scalars": 0})
     accumulator.Reload()
-    out = {}
-    for tag in accumulator.Tags()["scalars"]:
-        out[tag.removeprefix("train/")] = [(event.step, event.value) for event in accumulator.Scalars(tag)]
-    return out
+    return {tag.removeprefix("train/"): [(e.step, e.wall_time, e.value) for e in accumulator.Scalars(tag)]
+            for tag in accumulator.Tags()["scalars"]}
 
 
-def training_summary(log_dir: str | Path, rows: int = 12, up_to: int | None = None) -> str:
-    """Medians of each term over ``rows`` equal stretches of the logged steps (those up to
-    step ``up_to`` when given: a log may run on past the checkpoint exported), as a markdown table."""
-    scalars = read_scalars(log_dir)
-    if up_to is not None:
-        scalars = {tag: [(step, v) for step, v in values if step <= up_to] for tag, values in scalars.items()}
+def training_summary(log: dict[str, list[tuple[int, float, float]]], rows: int = 12, up_to: int | None = None) -> str:
+    """Medians of each term of ``log`` (``read_log``) over ``rows`` equal stretches of the
+    logged steps (those up to step ``up_to`` when given: a log may run on past the checkpoint
+    exported), as a markdown table."""
+    scalars = {tag: [(step, value) for step, _, value in events if up_to is None or step <= up_to]
+               for tag, events in log.items()}
     if "loss" not in scalars or not scalars["loss"]:
         return "(no training steps logged)"
     last_step = max(step for step, _ in scalars["loss"])
@@ -48,20 +47,11 @@ def training_summary(log_dir: str | Path, rows: int = 12, up_to: int | None = No
     return "\n".join(lines)
 
 
-def training_seconds(log_dir: str | Path, up_to: int | None = None, longest_gap: float = 600.0) -> float:
-    """Wall-clock seconds spent training, from the logged loss's timestamps (steps up to
-    ``up_to`` when given): the sum of the gaps between consecutive logged steps, leaving out
-    gaps over ``longest_gap`` s (a run stopped and resumed later)."""
-    import logging
-
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
-    logging.getLogger("tensorboard").setLevel(logging.ERROR)
-    accumulator = EventAccumulator(str(log_dir), size_guidance={"scalars": 0})
-    accumulator.Reload()
-    if "train/loss" not in accumulator.Tags()["scalars"]:
-        return 0.0
-    events = sorted((e.step, e.wall_time) for e in accumulator.Scalars("train/loss")
-                    if up_to is None or e.step <= up_to)
+def training_seconds(log: dict[str, list[tuple[int, float, float]]], up_to: int | None = None,
+                     longest_gap: float = 600.0) -> float:
+    """Wall-clock seconds spent training, from the logged loss's timestamps in ``log``
+    (``read_log``; steps up to ``up_to`` when given): the sum of the gaps between consecutive
+    logged steps, leaving out gaps over ``longest_gap`` s (a run stopped and resumed later)."""
+    events = sorted((step, wall_time) for step, wall_time, _ in log.get("loss", []) if up_to is None or step <= up_to)
     gaps = (later[1] - earlier[1] for earlier, later in zip(events[:-1], events[1:]))
     return float(sum(gap for gap in gaps if 0.0 < gap <= longest_gap))
