@@ -29,3 +29,30 @@ def test_episodes_get_hops_on_their_root(body):
     assert float(lowest.max() - lowest.min()) > 0.08
     still = TeacherData(DataConfig(**{**config.__dict__, "airborne_fraction": 0.0}), seed=0).sample_episode(40)
     assert float(still.body_vertices[..., 2].amin(-1).max() - still.body_vertices[..., 2].amin(-1).min()) < 0.03
+
+
+def test_draped_identities_settle_the_carried_garment(body):
+    """data.drape: the garment a rollout starts from (and bones bind to) is the carried one
+    settled on the body, cached on disk; the physics rest shape stays the carried one."""
+    from dataclasses import replace
+
+    from hyperbones.body.shape import BodyShape
+    from hyperbones.physics.material import Material
+    from hyperbones.simulate.garments import cache_dir
+
+    config = DataConfig(templates=("tshirt-open",), resolutions=(1000,), train_clips=(), builtins=("idle",), drape=True)
+    shape = BodyShape(gender=0.8, age=0.4, muscle=0.3, weight=0.8, height=0.3, proportions=0.6)
+    draped = TeacherData(config, seed=0).identity_for("tshirt-open", 1000, shape, Material())
+    carried = TeacherData(replace(config, drape=False), seed=0).identity_for("tshirt-open", 1000, shape, Material())
+    assert draped.draped and not carried.draped
+    assert torch.equal(draped.rest.rest_vertices, carried.rest.rest_vertices)
+    moved = (draped.garment.vertices - carried.garment.vertices).norm(dim=-1)
+    assert float(moved.max()) > 0.005  # the open panels and hem fell under gravity
+    assert float(draped.garment.vertices[:, 2].mean()) < float(carried.garment.vertices[:, 2].mean())
+    files = list((cache_dir() / "training-drapes").glob("tshirt-open-1000-*.pt"))
+    assert len(files) == 1
+    again = TeacherData(config, seed=1).identity_for("tshirt-open", 1000, shape, Material())
+    assert torch.equal(again.garment.vertices, draped.garment.vertices)  # from the cache
+    other = TeacherData(config, seed=1).identity_for("tshirt-open", 1000, shape, Material(density=0.3))
+    assert len(list((cache_dir() / "training-drapes").glob("tshirt-open-1000-*.pt"))) == 2  # the fabric is in the key
+    assert not torch.equal(other.garment.vertices, draped.garment.vertices)

@@ -135,6 +135,16 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
     raw = torch.load(tmp_path / "joint" / "checkpoint.pt", weights_only=True)
     assert raw["ema"] and not any(k.startswith("teacher.") for k in raw["ema"])
 
+    # A joint run started from a joint checkpoint (fine-tuning) takes A and B too, from the moving average.
+    tuned = {**values, "train": {**values["train"], "init_from": str(tmp_path / "joint" / "checkpoint.pt")}}
+    fine = JointTrainer(HyperBonesTrainingConfig.from_dict(tuned), tmp_path / "fine", progress=False, max_steps=1)
+    average = load_checkpoint(tmp_path / "joint" / "checkpoint.pt")["ema"]
+    assert all(torch.equal(value, average[name]) for name, value in fine.model.state_dict().items())
+    fine.close()
+    other = {**tuned, "runtime": {**tuned["runtime"], "window_frames": 3}}
+    with pytest.raises(ParameterError, match="train.init_from has runtime"):
+        JointTrainer(HyperBonesTrainingConfig.from_dict(other), tmp_path / "other", progress=False)
+
 
 def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, capsys):
     """hyperbones rollouts fills a bank; the same seed goes on with new draws; phase 2 loads from it."""
@@ -164,6 +174,12 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert trainer.train() == 1
     trainer.close()
     assert len(trainer.cache.rollouts) == 2 and all(r.source for r in trainer.cache.rollouts)  # loaded, not simulated
+    assert records[0]["draped"] is False
+    draping = HyperBonesTrainingConfig.from_dict({**values, "data": {**values["data"], "drape": True}})
+    draping_trainer = JointTrainer(draping, tmp_path / "draping", progress=False)
+    with pytest.raises(InputFileError, match="rollout-s3-00000.pt: rollout started from an undraped .* data.drape = true"):
+        draping_trainer.cache.load(files[0])
+    draping_trainer.close()
 
     with pytest.raises(InputFileError, match="bad.pt: not a version-1 hyperbones saved rollout"):
         torch.save({"something": 1}, tmp_path / "bad.pt")

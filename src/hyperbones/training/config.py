@@ -40,6 +40,11 @@ class DataConfig:
         the clip (``training.data.ballistic_hops``), launched at ``hop_speeds`` (m/s, a
         range): the clips hold a few tenths of a second of flight, too little to learn
         that cloth falls at g once the body drops away from it.
+    drape: settle each carried garment on its body (``garment.drape``, cached on disk)
+        before use, as ``simulate`` and ``eval`` do: rollouts start from the drape, and the
+        virtual bones and Module B's graph are built on it. Off: on the carried garment,
+        which the first (settling) step of a rollout then drapes. The physics rest shape
+        is the carried garment either way.
     """
 
     templates: tuple[str, ...] = TEMPLATE_NAMES
@@ -58,6 +63,7 @@ class DataConfig:
     settle_dt: float = 1.0 / 3.0
     airborne_fraction: float = 0.0
     hop_speeds: tuple[float, float] = (0.8, 2.2)
+    drape: bool = False
 
 
 @dataclass(frozen=True)
@@ -67,7 +73,9 @@ class TrainConfig:
     init_from: a training checkpoint (path relative to the folder the command runs in) whose
         teacher weights and input statistics a new run starts from, with a fresh optimiser and
         step 0 (a joint checkpoint gives its Module C); its model section must match this
-        config's. Empty: random initialisation.
+        config's. A joint (phase 2) run started from a joint checkpoint (a training one or
+        an exported model) takes all of it, Modules A and B too (the moving average where
+        the checkpoint keeps one): a fine-tuning run. Empty: random initialisation.
     learning_rate_halve_at: steps at which the learning rate halves (a staircase decay).
     ema_decay: the checkpoint also keeps an exponential moving average of the weights with
         this decay per step, and inference loads it (single steps of the one-step physics

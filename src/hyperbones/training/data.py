@@ -7,12 +7,17 @@ Expensive parts are done once per process and reused by every episode:
     a hold at the end.
 Per episode a new body shape takes ~20 ms; the garment is carried onto it (that carried
 garment is its rest shape) and the clip's root path is scaled by the leg-length ratio.
+With ``data.drape`` the carried garment is also settled on the body (``draped_vertices``;
+seconds each, cached on disk).
 """
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import random
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -21,6 +26,7 @@ import torch
 from hyperbones.body.anny_body import Body, body_for
 from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
 from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.garment.drape import drape
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
 from hyperbones.geometry.lbs import linear_blend_skinning
@@ -34,6 +40,7 @@ from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import GRAVITY
 from hyperbones.physics.material import Material, sample_material
 from hyperbones.physics.strain_limit import StrainLimiter
+from hyperbones.simulate.garments import CACHE_VERSION as DRAPE_CACHE_VERSION
 from hyperbones.simulate.garments import cache_dir
 from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
 from hyperbones.training.config import DataConfig
@@ -102,6 +109,24 @@ def template_source(name: str, vertices: int, default_body: Body) -> GarmentSour
     return GarmentSource(garment, weights, ShapeFollower.bind(garment, default_body))
 
 
+def draped_vertices(garment: Garment, body: Body, resolution: int) -> torch.Tensor:
+    """(V,3) ``garment`` (a template carried to ``body``, at ``resolution``) settled on the
+    body's canonical pose by ``garment.drape``, its carried shape as rest shape; cached on
+    disk by template, resolution, body shape and fabric."""
+    key = {"template": garment.name, "resolution": resolution, "body": body.shape.as_dict(),
+           "material": garment.material.as_dict(), "templates": TEMPLATE_CACHE_VERSION, "drape": DRAPE_CACHE_VERSION}
+    digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    path = cache_dir() / "training-drapes" / f"{garment.name}-{resolution}-{digest}.pt"
+    if path.exists():
+        return torch.load(path, weights_only=True)
+    with warnings.catch_warnings(), torch.enable_grad():  # the drape's Newton steps need gradients (rollouts run without)
+        warnings.simplefilter("ignore")  # an unconverged drape is still a settled start; the rollout goes on from it
+        settled, _ = drape(garment, body)
+    with atomic_path(path) as tmp:
+        torch.save(settled.vertices, tmp)
+    return settled.vertices
+
+
 @dataclass
 class Identity:
     """One garment on one body with one fabric: what the physics and the graph need.
@@ -109,7 +134,8 @@ class Identity:
     rest: the cloth's rest state (float32); topology: the graph's fixed part;
     skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them);
     limiter: the strain limiting applied to each step's result (``physics.strain_limit``);
-    garment: the ``Garment`` itself at its rest shape on this body (what Module B encodes).
+    garment: the ``Garment`` itself on this body (what Module B encodes and rollouts start
+    from): at its rest shape, or settled on the body when ``draped``.
     """
 
     name: str
@@ -120,15 +146,16 @@ class Identity:
     limiter: StrainLimiter
     garment: Garment | None = None  # the garment carried to this body (UVs, pins, fabric), when known
     resolution: int | None = None  # the template resolution it was made from, when sampled by TeacherData
+    draped: bool = False  # garment is the carried garment settled on the body (data.drape)
 
     @classmethod
     def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
               skin_weights: torch.Tensor, material: Material, garment: Garment | None = None,
-              resolution: int | None = None) -> "Identity":
+              resolution: int | None = None, draped: bool = False) -> "Identity":
         rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
         topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
         return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask),
-                   garment, resolution)
+                   garment, resolution, draped)
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
         """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
@@ -222,15 +249,17 @@ class TeacherData:
 
     def identity_for(self, name: str, vertices: int, shape: BodyShape, material: Material) -> Identity:
         """Template ``name`` at resolution ``vertices`` (one of the config's) carried to the
-        body of ``shape``, in ``material``."""
+        body of ``shape``, in ``material`` (and draped there with ``data.drape``)."""
         if (name, vertices) not in self.sources:
             raise ParameterError(f"no training garment {name!r} at {vertices} vertices in this config")
         source = self.sources[(name, vertices)]
         body = Body(shape)
         rest_vertices = source.follower.place(body)
+        garment = replace(source.garment.with_vertices(rest_vertices), material=material)
+        if self.config.drape:
+            garment = garment.with_vertices(draped_vertices(garment, body, vertices))
         return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                              source.skin_weights, material,
-                              replace(source.garment.with_vertices(rest_vertices), material=material), vertices)
+                              source.skin_weights, material, garment, vertices, self.config.drape)
 
     def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
         """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),

@@ -26,6 +26,7 @@ from hyperbones.models.module_a import heading_frame
 from hyperbones.models.teacher import Teacher
 from hyperbones.runtime.identity import apply_encoder
 from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
+from hyperbones.training.checkpoint import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.loss import collision_weight_at, runtime_terms
 from hyperbones.training.rollouts import RolloutCache
@@ -56,6 +57,20 @@ class JointTrainer(TeacherTrainer):
 
     def _build_model(self) -> torch.nn.Module:
         return HyperBonesModel(HyperBonesConfig(self.config.model, self.config.runtime))
+
+    def _initialise_from(self, path: Path) -> None:
+        """A phase-1 teacher starts C and the trunk; a joint checkpoint (training or exported)
+        starts the whole model, from its weights' moving average where it keeps one."""
+        payload = load_checkpoint(path, map_location=self.device)
+        if "runtime" not in payload["config"]:
+            super()._initialise_from(path)
+            return
+        mine = self.config.as_dict()
+        for section in ("model", "runtime"):
+            if payload["config"][section] != mine[section]:
+                raise ParameterError(f"{path}: train.init_from has {section} {payload['config'][section]}, "
+                                     f"this config {mine[section]}")
+        self.model.load_state_dict(payload.get("ema") or payload["model"])
 
     @property
     def teacher(self) -> Teacher:

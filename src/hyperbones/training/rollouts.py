@@ -160,6 +160,10 @@ class RolloutCache:
     def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
         """A rollout saved by ``save_rollout``, rebuilt on this config's garments."""
         record = load_rollout(path)
+        if record.get("draped", False) != self.data.config.drape:
+            started = "a draped garment" if record.get("draped", False) else "an undraped (carried) garment"
+            raise InputFileError(path, f"rollout started from {started}, but this config has data.drape = "
+                                       f"{str(self.data.config.drape).lower()}")
         identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
                                           Material(**record["material"]))
         if identity.rest.rest_vertices.shape[0] != record["positions"].shape[1]:
@@ -202,15 +206,16 @@ def bank_files(folder: str | Path) -> list[Path]:
 def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor,
                  root: torch.Tensor, positions: torch.Tensor) -> Path:
     """Write one rollout compactly (atomically): what rebuilds its identity (template,
-    resolution, body shape, fabric), the clip window and C's garment in half precision
-    (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed again on loading."""
+    resolution, body shape, fabric, whether it was draped), the clip window and C's garment
+    in half precision (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed
+    again on loading."""
     if identity.resolution is None:
         raise ParameterError("only an identity sampled by TeacherData (with its template resolution) can be saved")
     path = Path(path)
     with atomic_path(path) as tmp:
         torch.save({"version": BANK_VERSION, "template": identity.name, "resolution": identity.resolution,
                     "shape": identity.body.shape.as_dict(), "material": identity.garment.material.as_dict(),
-                    "motion": motion, "joint_rotations": joint_rotations.float(),
+                    "draped": identity.draped, "motion": motion, "joint_rotations": joint_rotations.float(),
                     "root_translation": root.float(), "positions": positions.half()}, tmp)
     return path
 
