@@ -87,3 +87,17 @@ def test_too_many_bones(body):
     garment = make_template("tshirt", body, vertices=1500)
     with pytest.raises(ParameterError, match="virtual bones asked for"):
         VirtualBones.bind(garment, body, num_bones=garment.num_vertices + 1)
+
+
+def test_bones_bind_at_the_rest_shape_when_given(rig, pants, body):
+    """A garment moved off its rest shape (as a drape moves it) keeps the bones' skinning
+    weights of the rest shape when that is given; bound where it is, they change."""
+    moved = pants.with_vertices(pants.vertices + torch.tensor([0.04, 0.0, -0.03]))
+    at_rest = VirtualBones.bind(moved, body, rest_vertices=pants.vertices)
+    assert torch.equal(at_rest.garment_vertex, rig.garment_vertex)  # same places on the cloth
+    assert torch.allclose(at_rest.rest_positions, moved.vertices[rig.garment_vertex])
+    assert torch.allclose(at_rest.joint_weights, rig.joint_weights)
+    where_it_is = VirtualBones.bind(moved, body)
+    assert (where_it_is.joint_weights - rig.joint_weights).abs().sum(1).max() > 0.05
+    with pytest.raises(ParameterError, match="rest shape .* does not match"):
+        VirtualBones.bind(moved, body, rest_vertices=pants.vertices[:-1])

@@ -188,4 +188,8 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     teacher_config.write_text("[model]\nlatent = 16\n")
     assert main(["rollouts", "--config", str(teacher_config), "--out", str(bank)]) == 2
     assert "not a HyperBones (phase 2) config" in capsys.readouterr().err
+    joint_config = tmp_path / "joint.toml"
+    joint_config.write_text("[model]\nlatent = 16\n[joint]\n")
+    assert main(["rollouts", "--config", str(joint_config), "--out", str(bank), "--templates", "dress,skirt"]) == 2
+    assert "--templates skirt: not among the config's data.templates" in capsys.readouterr().err
 

@@ -7,6 +7,7 @@ import math
 import sys
 import time
 import warnings
+from dataclasses import replace
 from pathlib import Path
 
 from hyperbones.errors import HyperbonesError, InputFileError, ParameterError
@@ -255,6 +256,13 @@ def cmd_rollouts(args) -> int:
     out = args.out or config.joint.bank
     if not out:
         raise ParameterError("no --out, and the config's joint.bank is empty")
+    if args.templates:
+        templates = tuple(_comma_list(args.templates))
+        unknown = sorted(set(templates) - set(config.data.templates))
+        if unknown:
+            raise ParameterError(f"--templates {', '.join(unknown)}: not among the config's data.templates "
+                                 f"({', '.join(config.data.templates)})")
+        config = replace(config, data=replace(config.data, templates=templates))
     generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet)
     return 0
 
@@ -284,8 +292,8 @@ def cmd_identity(args) -> int:
     if args.untrained and args.checkpoint:
         raise ParameterError("--untrained and --checkpoint exclude each other")
     body = body_for(BodyShape.parse(args.body))
-    garment, _ = draped_garment(args.garment, body, vertices=args.vertices, piece=args.piece,
-                                material=Material.parse(args.material))
+    garment, rest_vertices = draped_garment(args.garment, body, vertices=args.vertices, piece=args.piece,
+                                            material=Material.parse(args.material))
     if args.untrained:
         from hyperbones.models.hyperbones import HyperBonesModel
 
@@ -294,7 +302,8 @@ def cmd_identity(args) -> int:
     else:
         model = hyperbones_from_checkpoint(args.checkpoint)
     with torch.no_grad():
-        identity = encode_identity(model, garment, body, uv_resolution=args.uv_resolution)
+        identity = encode_identity(model, garment, body, uv_resolution=args.uv_resolution,
+                                   rest_vertices=rest_vertices)
     out = identity.save(args.out)
     print(f"wrote {out.resolve()} ({identity.num_vertices} vertices, {identity.bones.num_bones} bones, "
           f"UV {identity.raster.resolution}²{', untrained: for timing only' if args.untrained else ''})")
@@ -487,6 +496,9 @@ def build_parser() -> argparse.ArgumentParser:
     rollouts.add_argument("--out", default=None, help="bank folder (default: the config's joint.bank)")
     rollouts.add_argument("--count", type=int, default=100, help="rollouts to add (default 100)")
     rollouts.add_argument("--seed", type=int, default=0, help="draw seed; one per process sharing a bank (default 0)")
+    rollouts.add_argument("--templates", default=None,
+                          help="comma list: draw only these of the config's garment templates (default: all), "
+                               "to add rollouts of garments the model does worst on")
     rollouts.add_argument("--quiet", action="store_true", help="no progress bar")
     rollouts.set_defaults(func=cmd_rollouts)
 

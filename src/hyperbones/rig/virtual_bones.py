@@ -49,8 +49,18 @@ class VirtualBones:
     log_weights: torch.Tensor
 
     @classmethod
-    def bind(cls, garment: Garment, body: Body, num_bones: int = NUM_BONES, sigma: float = SIGMA) -> "VirtualBones":
-        """Place ``num_bones`` bones on ``garment`` (canonical, fitted to ``body``)."""
+    def bind(cls, garment: Garment, body: Body, num_bones: int = NUM_BONES, sigma: float = SIGMA,
+             rest_vertices: torch.Tensor | None = None) -> "VirtualBones":
+        """Place ``num_bones`` bones on ``garment`` (canonical, fitted to ``body``).
+
+        Each bone takes the skinning weights of the skin nearest its garment vertex on
+        ``rest_vertices`` (V,3), the garment's rest shape on this body, when given; else
+        where the vertex is on ``garment``. A drape can lay cloth on another body part than
+        the one it was cut for (an open shirt's side panels on the arms of a heavy body):
+        bound on the drape, those bones would swing with the arms; bound at the rest shape
+        they stay with the torso. Training binds at the rest shape (its garments are
+        undraped there).
+        """
         # Binding needs Warp and potpourri3d; posing (the per-frame path) needs neither.
         from hyperbones.geometry.geodesic import geodesic_distances
         from hyperbones.geometry.proximity import BodyProximity
@@ -64,7 +74,11 @@ class VirtualBones:
         picked = farthest_point_sampling(vertices, num_bones)
         proximity = BodyProximity(body.faces.cpu())
         proximity.update(body.rest_vertices.cpu())
-        nearest = proximity.query(vertices[picked], max_distance=10.0)
+        if rest_vertices is not None and rest_vertices.shape != vertices.shape:
+            raise ParameterError(f"garment {garment.name!r}: rest shape {tuple(rest_vertices.shape)} does not match "
+                                 f"its vertices {tuple(vertices.shape)}")
+        anchors = vertices if rest_vertices is None else rest_vertices.detach().to("cpu", torch.float32)
+        nearest = proximity.query(anchors[picked], max_distance=10.0)
         corners = body.faces.cpu()[nearest.face]  # (B,3)
         joint_weights = (nearest.barycentric[..., None] * body.skin_weights.cpu()[corners]).sum(1)
         joint_weights = joint_weights / joint_weights.sum(1, keepdim=True)

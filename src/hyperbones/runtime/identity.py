@@ -120,12 +120,15 @@ class IdentityGeometry:
 
     @classmethod
     def build(cls, garment: Garment, body: Body, num_bones: int, uv_resolution: int,
-              device: torch.device | str = "cpu", name: str | None = None) -> "IdentityGeometry":
+              device: torch.device | str = "cpu", name: str | None = None,
+              rest_vertices: torch.Tensor | None = None) -> "IdentityGeometry":
+        """``garment`` as it starts (draped) on ``body``; ``rest_vertices`` (V,3): its rest
+        shape there, where the virtual bones take their skinning weights (``VirtualBones.bind``)."""
         from hyperbones.geometry.proximity import BodyProximity
         from hyperbones.models.cloth_graph import GarmentTopology, canonical_graph
         from hyperbones.physics.cloth import ClothRest
 
-        bones = VirtualBones.bind(garment, body, num_bones)
+        bones = VirtualBones.bind(garment, body, num_bones, rest_vertices=rest_vertices)
         raster = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices, uv_resolution)
         rest = ClothRest.from_mesh(garment.vertices, garment.faces, garment.material)
         topology = GarmentTopology.build(rest.rest_vertices, garment.faces, garment.pinned, rest.vertex_masses,
@@ -154,15 +157,17 @@ def apply_encoder(model: HyperBonesModel, geometry: IdentityGeometry, train_trun
 
 
 def encode_identity(model: HyperBonesModel, garment: Garment, body: Body, name: str | None = None,
-                    uv_resolution: int | None = None) -> Identity:
+                    uv_resolution: int | None = None, rest_vertices: torch.Tensor | None = None) -> Identity:
     """Run Module B for ``garment`` fitted to ``body`` (canonical pose); differentiable when grad is on.
 
     uv_resolution: R of the UV maps (default: the model's training resolution).
+    rest_vertices: (V,3) the garment's rest shape on ``body`` (``draped_garment``'s second
+    value), where the bones take their skinning weights; None: ``garment`` itself.
     The virtual bones and the UV maps depend on geometry alone; the network contributes
     Δw, z (as FiLM parameters) and F_UV.
     """
     config = model.config.runtime
     device = next(model.parameters()).device
     geometry = IdentityGeometry.build(garment, body, config.num_bones, uv_resolution or config.uv_resolution,
-                                      device, name)
+                                      device, name, rest_vertices=rest_vertices)
     return apply_encoder(model, geometry)

@@ -241,17 +241,22 @@ class Simulator:
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
              uv_resolution: int | None = None, contact: bool = True,
              projection_iterations: int = PROJECTION_ITERATIONS, follow: float = FOLLOW,
-             loose_follow: float = LOOSE_FOLLOW, carry_lag: float = CARRY_LAG) -> "Simulator":
+             loose_follow: float = LOOSE_FOLLOW, carry_lag: float = CARRY_LAG,
+             rest_vertices: list[torch.Tensor | None] | None = None) -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
         shipped one). ``contact``: ``step`` may then take the posed bodies (all characters
-        share Anny's topology)."""
+        share Anny's topology). ``rest_vertices``: each garment's rest shape (V_i,3), as
+        ``draped_garment`` returns it, where its bones bind (``VirtualBones.bind``)."""
         from hyperbones.runtime.identity import encode_identity
 
         model = hyperbones_from_checkpoint(checkpoint, device)
         with torch.no_grad():
-            identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution)
-                          for garment, body in characters]
+            rests = rest_vertices or [None] * len(characters)
+            if len(rests) != len(characters):
+                raise ParameterError(f"{len(rests)} rest shapes for {len(characters)} characters")
+            identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution, rest_vertices=rest)
+                          for (garment, body), rest in zip(characters, rests)]
         return cls(model.runtime, identities, device, body_faces=characters[0][1].faces if contact else None,
                    projection_iterations=projection_iterations, follow=follow,
                    loose_follow=loose_follow, carry_lag=carry_lag)

@@ -30,7 +30,8 @@ class HyperBonesMethod:
         garment = replace(garment, material=material or garment.material)
         self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact,
                                         follow=FOLLOW if contact else 1.0,
-                                        loose_follow=LOOSE_FOLLOW if contact else 1.0)
+                                        loose_follow=LOOSE_FOLLOW if contact else 1.0,
+                                        rest_vertices=[rest_vertices])
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:

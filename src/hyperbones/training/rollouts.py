@@ -153,7 +153,7 @@ class RolloutCache:
             posed = identity.body.pose(joint_rotations, root)
         garment = identity.garment
         geometry = IdentityGeometry.build(garment, identity.body, self.num_bones, self.uv_resolution, self.device,
-                                          name=identity.name)
+                                          name=identity.name, rest_vertices=identity.rest.rest_vertices)
         return TeacherRollout(identity, geometry, joint_rotations, root, posed.skinning_transforms, posed.vertices,
                               positions.float(), garment.edges(), motion, step, source=source)
 
