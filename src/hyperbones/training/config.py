@@ -41,8 +41,9 @@ class DataConfig:
         range): the clips hold a few tenths of a second of flight, too little to learn
         that cloth falls at g once the body drops away from it.
     drape: settle each carried garment on its body (``garment.drape``, cached on disk)
-        before use, as ``simulate`` and ``eval`` do: rollouts start from the drape, and the
-        virtual bones and Module B's graph are built on it. Off: on the carried garment,
+        before use, as ``simulate`` and ``eval`` do: rollouts start from the drape, and
+        Module B's graph and the virtual bones' places are built on it (the bones' skinning
+        weights come from the rest shape either way). Off: on the carried garment,
         which the first (settling) step of a rollout then drapes. The physics rest shape
         is the carried garment either way.
     """
