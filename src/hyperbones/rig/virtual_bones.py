@@ -71,12 +71,12 @@ class VirtualBones:
         if sigma <= 0:
             raise ParameterError(f"virtual bones: sigma must be > 0 m, got {sigma}")
         vertices = garment.vertices.cpu()
-        picked = farthest_point_sampling(vertices, num_bones)
-        proximity = BodyProximity(body.faces.cpu())
-        proximity.update(body.rest_vertices.cpu())
         if rest_vertices is not None and rest_vertices.shape != vertices.shape:
             raise ParameterError(f"garment {garment.name!r}: rest shape {tuple(rest_vertices.shape)} does not match "
                                  f"its vertices {tuple(vertices.shape)}")
+        picked = farthest_point_sampling(vertices, num_bones)
+        proximity = BodyProximity(body.faces.cpu())
+        proximity.update(body.rest_vertices.cpu())
         anchors = vertices if rest_vertices is None else rest_vertices.detach().to("cpu", torch.float32)
         nearest = proximity.query(anchors[picked], max_distance=10.0)
         corners = body.faces.cpu()[nearest.face]  # (B,3)

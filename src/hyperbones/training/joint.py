@@ -30,7 +30,7 @@ from hyperbones.training.checkpoint import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.loss import collision_weight_at, runtime_terms
 from hyperbones.training.rollouts import RolloutCache
-from hyperbones.training.trainer import QUERY_DISTANCE, TeacherTrainer
+from hyperbones.training.trainer import QUERY_DISTANCE, TeacherTrainer, check_sections
 
 INITIAL_ROLLOUTS = 4  # made before the first step; the cache then grows by one per refresh
 
@@ -63,13 +63,9 @@ class JointTrainer(TeacherTrainer):
         starts the whole model, from its weights' moving average where it keeps one."""
         payload = load_checkpoint(path, map_location=self.device)
         if "runtime" not in payload["config"]:
-            super()._initialise_from(path)
+            super()._initialise_from(path, payload)
             return
-        mine = self.config.as_dict()
-        for section in ("model", "runtime"):
-            if payload["config"][section] != mine[section]:
-                raise ParameterError(f"{path}: train.init_from has {section} {payload['config'][section]}, "
-                                     f"this config {mine[section]}")
+        check_sections(path, payload, self.config, ("model", "runtime"))
         self.model.load_state_dict(payload.get("ema") or payload["model"])
 
     @property

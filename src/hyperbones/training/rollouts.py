@@ -160,8 +160,9 @@ class RolloutCache:
     def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
         """A rollout saved by ``save_rollout``, rebuilt on this config's garments."""
         record = load_rollout(path)
-        if record.get("draped", False) != self.data.config.drape:
-            started = "a draped garment" if record.get("draped", False) else "an undraped (carried) garment"
+        draped = record.get("draped", False)  # banks from before the flag are undraped
+        if draped != self.data.config.drape:
+            started = "a draped garment" if draped else "an undraped (carried) garment"
             raise InputFileError(path, f"rollout started from {started}, but this config has data.drape = "
                                        f"{str(self.data.config.drape).lower()}")
         identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),

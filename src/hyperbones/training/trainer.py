@@ -138,12 +138,11 @@ class TeacherTrainer:
         torch.cuda.set_device(self.device)
         return "nccl" if world <= gpus else "gloo"
 
-    def _initialise_from(self, path: Path) -> None:
-        """Model weights and input statistics of another run's checkpoint (a fine-tuning start)."""
-        payload = load_checkpoint(path, map_location=self.device)
-        if payload["config"]["model"] != self.config.as_dict()["model"]:
-            raise ParameterError(f"{path}: train.init_from has model {payload['config']['model']}, "
-                                 f"this config {self.config.as_dict()['model']}")
+    def _initialise_from(self, path: Path, payload: dict | None = None) -> None:
+        """Model weights and input statistics of another run's checkpoint (a fine-tuning start);
+        ``payload``: that checkpoint, when already loaded."""
+        payload = payload or load_checkpoint(path, map_location=self.device)
+        check_sections(path, payload, self.config, ("model",))
         self.teacher.load_state_dict(teacher_state(payload, average=False))
 
     # -- one optimiser step -------------------------------------------------------------
@@ -290,6 +289,16 @@ class TeacherTrainer:
             dist.destroy_process_group()
 
 
+def check_sections(path, payload: dict, config: TeacherTrainingConfig, sections: tuple[str, ...]) -> None:
+    """Raise unless the checkpoint ``payload`` (from ``path``, a train.init_from) has the
+    same ``sections`` of the config as ``config``."""
+    mine = config.as_dict()
+    for section in sections:
+        if payload["config"][section] != mine[section]:
+            raise ParameterError(f"{path}: train.init_from has {section} {payload['config'][section]}, "
+                                 f"this config {mine[section]}")
+
+
 def teacher_state(payload: dict, average: bool = True) -> dict[str, torch.Tensor]:
     """The teacher's state dict in a checkpoint's payload: the weights' moving average when
     ``average`` and the checkpoint keeps one, else the weights; Module C's part of a joint
@@ -310,4 +319,4 @@ def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[T
     return model, payload
 
 
-__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "teacher_state", "rollout_length"]
+__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "teacher_state", "check_sections", "rollout_length"]
