@@ -92,3 +92,31 @@ def test_skin_motion_is_how_far_the_skin_under_each_vertex_moved(body):
     assert torch.allclose(distance[:50], nearest.signed_distance, atol=1e-6)  # a centimetre or a little less
     contact.forget()
     assert contact.skin_motion(0, bent) is None
+
+
+def test_a_vertex_pushed_out_beyond_the_body_comes_back_to_its_neighbours_side(body):
+    """A limb that went through the cloth leaves a vertex nearest the far side: pushed out
+    there, its edges would reach round the body. Untangling brings it back in front."""
+    vertices, faces = body.rest_vertices, body.faces
+    chest = (vertices[:, 2] > 1.2) & (vertices[:, 2] < 1.3) & (vertices[:, 0].abs() < 0.05)
+    front, back = float(vertices[chest, 1].min()), float(vertices[chest, 1].max())
+    sheet, sheet_faces = _grid(7, 7, 0.02)
+    placed = sheet + torch.tensor([-0.06, front - 0.01, 1.19])  # a centimetre in front of the chest
+    middle = 24  # the sheet's centre vertex
+    tangled = placed.clone()
+    tangled[middle, 1] = back - 0.02  # two centimetres under the skin of the back
+    projection = EdgeProjection(placed, sheet_faces)
+    kept = BodyContact(faces, characters=1, margin=0.002, projections=[projection], untangle=False)
+    untangled = BodyContact(faces, characters=1, margin=0.002, projections=[projection])
+    (behind,) = kept([tangled], vertices[None])
+    (back_in_front,) = untangled([tangled], vertices[None])
+    assert float(behind[middle, 1]) > back - 0.01  # pushed out of the back, the width of the body away
+    assert float(back_in_front[middle, 1]) < front  # in front of the chest with its neighbours
+    proximity = BodyProximity(faces)
+    proximity.update(vertices)
+    assert float(proximity.query(back_in_front, max_distance=0.1).signed_distance.min()) > 0.0
+    others = torch.arange(len(placed)) != middle
+    # Left behind, the vertex's edges drag its neighbours towards the chest; brought back, they stay put.
+    assert float((behind[others] - placed[others]).norm(dim=1).max()) > 0.01
+    assert float((back_in_front[others] - placed[others]).norm(dim=1).max()) < 0.003
+
