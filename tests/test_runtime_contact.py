@@ -5,6 +5,7 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.contact import BodyContact
 from hyperbones.runtime.isometry import EdgeProjection
 
@@ -20,7 +21,7 @@ def test_points_inside_the_body_come_out_and_the_others_stay(body):
     normals = proximity.query(vertices[picked], max_distance=0.1).normal
     inside = vertices[picked] - 0.01 * normals   # a centimetre under the skin
     outside = vertices[picked] + 0.03 * normals  # three centimetres off it
-    contact = BodyContact(faces, characters=1, margin=0.002)
+    contact = BodyContact(faces, characters=1, config=RuntimeConfig(contact_margin=0.002))
     clear = proximity.query(outside, max_distance=0.1).signed_distance >= 0.002  # not in another body part
     assert int(clear.sum()) > 300
     (pushed,) = contact([torch.cat([inside, outside])], vertices[None])
@@ -48,8 +49,8 @@ def test_edge_projection_pulls_a_stretched_sheet_back_and_keeps_it_out_of_the_bo
     placed = sheet + torch.tensor([-0.11, front - 0.15, 1.14])
     stretched = placed * torch.tensor([1.15, 1.0, 1.0]) - torch.tensor([placed[:, 0].mean() * 0.15, 0, 0])
     projection = EdgeProjection(placed, sheet_faces)
-    plain = BodyContact(faces, characters=1, margin=0.002)
-    limited = BodyContact(faces, characters=1, margin=0.002, projections=[projection])
+    plain = BodyContact(faces, characters=1, config=RuntimeConfig(contact_margin=0.002))
+    limited = BodyContact(faces, characters=1, projections=[projection], config=RuntimeConfig(contact_margin=0.002))
     first, second = projection.edges[:, 0], projection.edges[:, 1]
 
     def strain(points):
@@ -77,7 +78,7 @@ def test_skin_motion_is_how_far_the_skin_under_each_vertex_moved(body):
     torso = torch.nonzero((vertices[:, 2] > 1.0) & (vertices[:, 2] < 1.35) & (vertices[:, 0].abs() < 0.15)).squeeze(1)
     near = vertices[torso[:50]] + 0.01 * proximity.query(vertices[torso[:50]], max_distance=0.1).normal
     far = vertices[torso[:5]] + torch.tensor([0.0, -0.5, 0.0])  # half a metre in front: beyond every query
-    contact = BodyContact(faces, characters=1, margin=0.002)
+    contact = BodyContact(faces, characters=1, config=RuntimeConfig(contact_margin=0.002))
     assert contact.skin_motion(0, vertices) is None  # nothing found yet
     contact([torch.cat([near, far])], vertices[None])
     # The body bends: each vertex moves by an amount of its own, so the skin stretches too.
@@ -106,8 +107,9 @@ def test_a_vertex_pushed_out_beyond_the_body_comes_back_to_its_neighbours_side(b
     tangled = placed.clone()
     tangled[middle, 1] = back - 0.02  # two centimetres under the skin of the back
     projection = EdgeProjection(placed, sheet_faces)
-    kept = BodyContact(faces, characters=1, margin=0.002, projections=[projection], untangle=False)
-    untangled = BodyContact(faces, characters=1, margin=0.002, projections=[projection])
+    kept = BodyContact(faces, characters=1, projections=[projection],
+                       config=RuntimeConfig(contact_margin=0.002, untangle=False))
+    untangled = BodyContact(faces, characters=1, projections=[projection], config=RuntimeConfig(contact_margin=0.002))
     (behind,) = kept([tangled], vertices[None])
     (back_in_front,) = untangled([tangled], vertices[None])
     assert float(behind[middle, 1]) > back - 0.01  # pushed out of the back, the width of the body away

@@ -12,6 +12,7 @@ from hyperbones.geometry.rotations import rot_z
 from hyperbones.models.hyperbones import HyperBonesModel
 from hyperbones.models.module_a import heading_frame
 from hyperbones.runtime.identity import encode_identity
+from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.simulator import Simulator, transform_points
 
 from test_runtime_identity import SMALL
@@ -48,7 +49,7 @@ def _run(simulator, rotations, roots):
 def test_untrained_runtime_is_virtual_bone_skinning(setup, body):
     model, identities, motion = setup
     identity = identities[0]
-    out = _run(Simulator(model.runtime, [identity], follow=1.0, loose_follow=1.0), motion.joint_rotations[None],
+    out = _run(Simulator(model.runtime, [identity], config=RuntimeConfig(follow=1.0, loose_follow=1.0)), motion.joint_rotations[None],
                motion.root_translation[None])[0]
     posed = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False)
     rotations, positions = identity.bones.pose(posed.skinning_transforms)
@@ -99,9 +100,9 @@ def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_i
     model, identities, motion = setup
     runtime = _trained_looking(model).runtime
     rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
-    direct = Simulator(runtime, identities[:1], follow=1.0, loose_follow=1.0)
+    direct = Simulator(runtime, identities[:1], config=RuntimeConfig(follow=1.0, loose_follow=1.0))
     targets = _run(direct, rotations, roots)[0]  # (T,V,3)
-    follow = Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.0)
+    follow = Simulator(runtime, identities[:1], config=RuntimeConfig(follow=0.5, carry_lag=0.0))
     outputs = _run(follow, rotations, roots)[0]
     assert torch.equal(outputs[0], targets[0])  # the first frame has nothing to follow from
     local = transform_points(heading_frame(rotations[0, :, 0], roots[0]), torch.stack([outputs, targets]))
@@ -112,19 +113,19 @@ def test_follow_moves_part_way_to_module_a_in_the_heading_frame_and_settles_on_i
         held, settled = follow.step(rotations[:, -1], roots[:, -1])[0], direct.step(rotations[:, -1], roots[:, -1])[0]
     assert float((held - settled).norm(dim=-1).max()) < 1e-5  # and settles where Module A is
     with pytest.raises(ParameterError, match="follow"):
-        Simulator(runtime, identities[:1], follow=0.0)
+        RuntimeConfig(follow=0.0)
     with pytest.raises(ParameterError, match="loose_follow"):
-        Simulator(runtime, identities[:1], loose_follow=1.5)
+        RuntimeConfig(loose_follow=1.5)
     with pytest.raises(ParameterError, match="carry_lag"):
-        Simulator(runtime, identities[:1], carry_lag=1.0)
+        RuntimeConfig(carry_lag=1.0)
 
 
 def test_carry_lag_carries_by_a_blend_of_this_and_the_last_frame_to_frame_motion(setup):
     model, identities, motion = setup
     runtime = _trained_looking(model).runtime
     rotations, roots = motion.joint_rotations[None, :12], motion.root_translation[None, :12]
-    targets = _run(Simulator(runtime, identities[:1], follow=1.0, loose_follow=1.0), rotations, roots)[0]
-    outputs = _run(Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.25), rotations, roots)[0]
+    targets = _run(Simulator(runtime, identities[:1], config=RuntimeConfig(follow=1.0, loose_follow=1.0)), rotations, roots)[0]
+    outputs = _run(Simulator(runtime, identities[:1], config=RuntimeConfig(follow=0.5, carry_lag=0.25)), rotations, roots)[0]
     heading = heading_frame(rotations[0, :, 0], roots[0])  # (T,4,4) world -> heading frame
     moves = torch.linalg.inv(heading[1:]) @ heading[:-1]  # (T-1,4,4): frame t-1 -> t
     expected = [targets[0], targets[1] + 0.5 * (transform_points(moves[0], targets[0]) - targets[1])]
@@ -132,7 +133,7 @@ def test_carry_lag_carries_by_a_blend_of_this_and_the_last_frame_to_frame_motion
         carried = transform_points(moves[t - 1] + 0.25 * (moves[t - 2] - moves[t - 1]), expected[-1])
         expected.append(carried + 0.5 * (targets[t] - carried))
     assert torch.allclose(outputs, torch.stack(expected), atol=1e-5)
-    assert float((outputs - _run(Simulator(runtime, identities[:1], follow=0.5, carry_lag=0.0), rotations,
+    assert float((outputs - _run(Simulator(runtime, identities[:1], config=RuntimeConfig(follow=0.5, carry_lag=0.0)), rotations,
                                  roots)[0]).norm(dim=-1).max()) > 1e-4  # the lag made a difference
 
 
@@ -148,7 +149,8 @@ def test_loose_cloth_lags_by_its_own_share_after_the_body_stops(setup, body):
     hem = torch.argsort(skirt.rest_vertices[:, 2])[: len(skirt.rest_vertices) // 20]
 
     def hem_after_stop(loose_follow):
-        simulator = Simulator(runtime, [skirt], body_faces=body.faces, follow=0.6, loose_follow=loose_follow)
+        simulator = Simulator(runtime, [skirt], body_faces=body.faces,
+                              config=RuntimeConfig(follow=0.6, loose_follow=loose_follow))
         for t in range(frames):
             simulator.step(rotations[:, t], roots[:, t], posed.vertices[None, t])
         held = [simulator.step(rotations[:, -1], roots[:, -1], posed.vertices[None, -1])[0][hem] for _ in range(40)]

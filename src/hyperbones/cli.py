@@ -12,6 +12,8 @@ from pathlib import Path
 
 from hyperbones.errors import HyperbonesError, InputFileError, ParameterError
 
+RUNTIME_HELP = ("runtime settings over the checkpoint's as key=value pairs, e.g. 'follow=0.5,untangle=false' "
+                "(hyperbones methods; the keys are RuntimeConfig's fields: hyperbones.runtime.config)")
 BODY_HELP = ("body shape as phenotype values in [0,1]: gender, age, muscle, weight, height, proportions, "
              "e.g. 'gender=0.2,weight=0.8' (default: all 0.5)")
 
@@ -98,7 +100,7 @@ def cmd_demo(args) -> int:
           "simulated by the shipped HyperBones model (Module B once, then Module A every frame)\n"
           "(the first run on a machine builds Anny's cache and drapes the dress: about a minute more)", flush=True)
     result = run_simulation("hyperbones", "dress", "walk", None, vertices=DEMO_VERTICES, hold=1.0,
-                            device=args.device, progress=not args.quiet)
+                            device=args.device, progress=not args.quiet, runtime=args.runtime)
     paths = export_simulation(result, Path(args.out).resolve(), progress=not args.quiet)
     print(f"done in {time.perf_counter() - start:.1f} s")
     _print_run(result, paths)
@@ -125,7 +127,7 @@ def cmd_simulate(args) -> int:
     result = run_simulation(args.method, args.garment, args.motion, args.body, frames=args.frames,
                             vertices=args.vertices, piece=args.piece, material=args.material,
                             blend_in=args.blend_in, hold=args.hold, checkpoint=args.checkpoint, device=args.device,
-                            source_fps=args.source_fps, progress=not args.quiet)
+                            source_fps=args.source_fps, progress=not args.quiet, runtime=args.runtime)
     paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet)
     _print_run(result, paths)
     return 0
@@ -185,7 +187,7 @@ def cmd_eval(args) -> int:
     report = evaluate(_comma_list(args.methods), _comma_list(args.garments), _comma_list(args.motions), bodies,
                       args.out, frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
                       device=args.device, source_fps=dict(args.source_fps or []), progress=not args.quiet,
-                      uv_resolution=args.uv_resolution)
+                      uv_resolution=args.uv_resolution, runtime=args.runtime)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
     return 0
@@ -241,7 +243,8 @@ def cmd_bench(args) -> int:
 
     records = bench(_comma_list(args.methods), _comma_list(args.garments), vertices=args.vertices,
                     device=args.device, frames=args.frames, warmup=args.warmup, late=args.late,
-                    checkpoint=args.checkpoint, uv_resolution=args.uv_resolution, progress=not args.quiet)
+                    checkpoint=args.checkpoint, uv_resolution=args.uv_resolution, progress=not args.quiet,
+                    runtime=args.runtime)
     _report_records(records, args.json, speedups(records))
     return 0
 
@@ -272,7 +275,7 @@ def cmd_check_hem(args) -> int:
 
     curves = hem_curves(_comma_list(args.methods), args.garment, args.motion, hold=args.hold, vertices=args.vertices,
                         body=args.body, checkpoint=args.checkpoint, device=args.device,
-                        source_fps=dict(args.source_fps or []))
+                        source_fps=dict(args.source_fps or []), runtime=args.runtime)
     print(hem_table(curves))
     out = plot_hem(curves, args.out, f"{args.garment} hem after {args.motion} stops")
     print(f"wrote {out.resolve()}")
@@ -361,6 +364,7 @@ def build_parser() -> argparse.ArgumentParser:
     demo.add_argument("--out", default="hyperbones-demo", help="output folder (default: ./hyperbones-demo)")
     demo.add_argument("--device", default="auto", help="cpu, cuda or auto (default: CUDA when present)")
     demo.add_argument("--quiet", action="store_true", help="no progress bars")
+    demo.add_argument("--runtime", default=None, metavar="KEY=VALUE,...", help=RUNTIME_HELP)
     demo.set_defaults(func=cmd_demo)
 
     motion = sub.add_parser("motion", help="write a motion (built-in or BVH, retargeted to a body) to .npz",
@@ -414,6 +418,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--obj", action="store_true", help="also write an OBJ per frame into DIR/obj/")
     simulate.add_argument("--no-preview", action="store_true", help="skip the preview video")
     simulate.add_argument("--quiet", action="store_true", help="no progress bars")
+    simulate.add_argument("--runtime", default=None, metavar="KEY=VALUE,...", help=RUNTIME_HELP)
     simulate.set_defaults(func=cmd_simulate)
 
     evaluation = sub.add_parser("eval", help="evaluate methods over garments, motions and bodies",
@@ -437,6 +442,7 @@ def build_parser() -> argparse.ArgumentParser:
                             help="UV size R of the hyperbones methods (default: the model's training one)")
     _add_source_fps_pairs(evaluation)
     evaluation.add_argument("--quiet", action="store_true", help="no progress bar")
+    evaluation.add_argument("--runtime", default=None, metavar="KEY=VALUE,...", help=RUNTIME_HELP)
     evaluation.set_defaults(func=cmd_eval)
 
     train = sub.add_parser("train", help="train the teacher (phase 1) or all of HyperBones (phase 2), self-supervised",
@@ -485,6 +491,7 @@ def build_parser() -> argparse.ArgumentParser:
                        help="UV map size R for hyperbones (default: the one it was trained at)")
     bench.add_argument("--json", default=None, help="also write the records to this JSON file")
     bench.add_argument("--quiet", action="store_true", help="no progress bar")
+    bench.add_argument("--runtime", default=None, metavar="KEY=VALUE,...", help=RUNTIME_HELP)
     bench.set_defaults(func=cmd_bench)
 
     rollouts = sub.add_parser("rollouts", help="simulate teacher rollouts into a bank for phase 2 (joint.bank)",
@@ -570,6 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     check_hem.add_argument("--device", default="auto", help="cpu, cuda or auto (default)")
     check_hem.add_argument("--out", default="hem.png", help="PNG to write (default: hem.png)")
     _add_source_fps_pairs(check_hem)
+    check_hem.add_argument("--runtime", default=None, metavar="KEY=VALUE,...", help=RUNTIME_HELP)
     check_hem.set_defaults(func=cmd_check_hem)
 
     garment = sub.add_parser("garment", help="make the built-in garments")

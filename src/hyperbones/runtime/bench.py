@@ -16,6 +16,7 @@ from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import ParameterError
 from hyperbones.motion.load import load_motion
+from hyperbones.runtime.config import parse_overrides
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.pipeline import METHODS
 from hyperbones.runtime.timing import BenchRecord, timed_blocks
@@ -24,18 +25,20 @@ from hyperbones.training.trainer import pick_device
 
 def bench(methods: list[str], garments: list[str], *, vertices: int | None = None, device: str = "auto",
           frames: int = 30, warmup: int = 5, late: int | None = None, checkpoint: str | None = None,
-          uv_resolution: int | None = None, progress: bool = True) -> list[BenchRecord]:
+          uv_resolution: int | None = None, progress: bool = True, runtime: str | None = None) -> list[BenchRecord]:
     """Time ``frames`` frames after ``warmup`` for each method × garment; one record each, and
     a second one for the ``frames`` frames from frame ``late`` on when given (the walk is then
     held still at its last pose for as long as it takes to get there).
 
-    uv_resolution: the UV maps' R for the hyperbones method (default: its training one).
+    uv_resolution: the UV maps' R for the hyperbones method (default: its training one);
+    runtime: ``--runtime`` settings for the hyperbones methods.
     """
     unknown = [m for m in methods if m not in METHODS]
     if unknown:
         raise ParameterError(f"unknown method(s) {unknown}; available: {', '.join(METHODS)}")
     if frames < 1 or warmup < 0:
         raise ParameterError("--frames must be >= 1 and --warmup >= 0")
+    overrides = parse_overrides(runtime)
     the_device = pick_device(device)
     body = body_for(BodyShape())
     length = (late if late is not None else warmup) + frames
@@ -46,7 +49,7 @@ def bench(methods: list[str], garments: list[str], *, vertices: int | None = Non
     for garment_name in tqdm(garments, desc="bench", disable=not progress):
         garment, rest_vertices = draped_garment(garment_name, body, vertices=vertices)
         for method in methods:
-            extra = {"uv_resolution": uv_resolution} if method.startswith("hyperbones") else {}
+            extra = {"uv_resolution": uv_resolution, "runtime": overrides} if method.startswith("hyperbones") else {}
             solver = METHODS[method](garment, body, rest_vertices=rest_vertices, material=garment.material,
                                      checkpoint=checkpoint, device=str(the_device), **extra)
             stream = solver.frames(posed)

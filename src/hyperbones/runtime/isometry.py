@@ -2,38 +2,18 @@
 rest edge lengths while staying near where Module A put it (a projective-dynamics solve).
 
 Module A blends rigid bone frames; where neighbouring bones move differently, the blend
-stretches the cloth (LBS shows the same artefact). Fixing that locally, edge by edge (the
-teacher's Jacobi strain limiter), spreads a correction one ring of vertices per sweep, so a
-stretch that spans a bone's reach (~10 cm, several rings) needs many sweeps. Here every
-iteration is global instead (Bouaziz et al. 2014, "Projective Dynamics"):
+stretches the cloth. A local, edge-by-edge fix (the teacher's Jacobi strain limiter) spreads a
+correction one ring of vertices per sweep; here every iteration is global instead (Bouaziz et
+al. 2014, "Projective Dynamics"):
 
     minimise  Σ_e |(x_i − x_j) − d_e|²  +  α Σ_v |x_v − a_v|²
 
 with a the input positions and d_e the current edge vector scaled to its rest length l_e
-(or clamped to a band around it, ``compression``/``stretch``). The local step sets every d_e
-at once; the global step is one solve with the constant matrix DᵀD + αI (D: the (E,V)
-edge-difference matrix), factorised once per garment (SuperLU, minimum-degree ordering,
-single precision: on the 8k dress one solve takes 1.8 ms on one core, against 3.8 ms with
-the default ordering in double).
-
-Defaults. The exact rest length as target: on Module A's dress at step 13000 over the
-held-out clip 16_35, without contact, 10 iterations give ε_e 2.99 % against 3.99 % with the
-teacher's band 0.97–1.01 l_e (α = 0.005). The anchor α was chosen in the closed loop of the
-runtime (follow, contact, two rounds of 5 iterations) on training clips with unseen bodies
-(16_07 and 02_03 × two eval body shapes, 1500 vertices; ε_e / ε_a %):
-
-| α | dress | long-skirt | tshirt | pants | strain J, dress |
-|---|---|---|---|---|---|
-| 0.005 | 3.58 / 4.45 | 3.95 / 4.35 | 3.65 / 4.90 | 3.74 / 4.60 | 2.10 |
-| 0.01 | 3.36 / 4.01 | 3.81 / 4.00 | 3.55 / 4.70 | 3.45 / 4.06 | 0.99 |
-| 0.02 | 3.29 / 3.78 | 3.76 / 3.79 | 3.51 / 4.54 | 3.32 / 3.76 | 0.36 |
-| 0.05 | 3.53 / 3.86 | 3.99 / 3.84 | 3.77 / 4.64 | 3.40 / 3.69 | 0.27 |
-
-A single projection converges further with a smaller α, but frame after frame a weak anchor
-lets the garment wander from the state the follow carries over (strain and jitter grow).
-Contact half-spaces (``physics.contact.ContactPlanes``) are enforced after every solve, as
-the teacher's limiter does after every sweep. The solve runs on the CPU whatever the
-device of the positions (one (V,3) copy each way per call).
+(or clamped to a band around it). The local step sets every d_e at once; the global step is
+one solve with the constant matrix DᵀD + αI (D: the (E,V) edge-difference matrix), factorised
+once per garment. Contact half-spaces (``physics.contact.ContactPlanes``) are enforced after
+every solve. The solve runs on the CPU whatever the device of the positions. Measurements
+behind the defaults: ``docs/experiments/2026-11-27-runtime-contact-projection.md``.
 """
 
 from __future__ import annotations
@@ -43,9 +23,7 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.physics.contact import ContactPlanes
-
-ANCHOR = 0.02  # α: how strongly each vertex keeps to its input position, against an edge's weight 1
-ITERATIONS = 5  # local/global steps per call (the runtime calls it once per contact round)
+from hyperbones.runtime.config import RuntimeConfig
 
 
 class EdgeProjection:
@@ -55,12 +33,15 @@ class EdgeProjection:
     edges: (E,2) the garment's undirected edges; rest_lengths: (E,) m.
     """
 
-    def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor, iterations: int = ITERATIONS,
-                 anchor: float = ANCHOR, stretch: float = 0.0, compression: float = 0.0):
-        """stretch, compression: the band of edge lengths left alone, as fractions of the rest
-        length (0, 0: every edge is pulled to its rest length; the teacher's limiter uses
-        ``physics.strain_limit``'s 0.01, 0.03)."""
-        import scipy.sparse  # here, so that importing this module (for ITERATIONS) stays light
+    def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor,
+                 iterations: int = RuntimeConfig.projection_iterations, anchor: float = RuntimeConfig.projection_anchor,
+                 stretch: float = RuntimeConfig.projection_stretch,
+                 compression: float = RuntimeConfig.projection_compression):
+        """iterations: local/global steps per ``project``; anchor: α; stretch, compression: the
+        band of edge lengths left alone, as fractions of the rest length (0, 0: every edge is
+        pulled to its rest length; the teacher's limiter uses ``physics.strain_limit``'s band).
+        Factorised with a minimum-degree ordering in single precision (the fastest measured)."""
+        import scipy.sparse  # here, so that importing this module stays light
         import scipy.sparse.linalg
 
         from hyperbones.physics.cloth import ClothRest

@@ -10,6 +10,7 @@ from tqdm import tqdm
 
 from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import capture_rate
+from hyperbones.runtime.config import parse_overrides
 from hyperbones.simulate.pipeline import run_simulation
 
 COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collision_pct", "ε_c % (d<0)"),
@@ -20,16 +21,19 @@ COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collisi
 def evaluate(methods: list[str], garments: list[str], motions: list[str], bodies: list[str], out_dir: str | Path,
              *, frames: int | None = None, vertices: int | None = None, hold: float = 0.0,
              checkpoint: str | None = None, device: str = "auto", source_fps: dict[str, float] | None = None,
-             progress: bool = True, uv_resolution: int | None = None) -> Path:
+             progress: bool = True, uv_resolution: int | None = None, runtime: str | None = None) -> Path:
     """Run every combination, write ``report.json`` (every run) and ``report.md`` (means per
     method and garment over motions and bodies). ``source_fps`` maps a BVH clip's file stem
-    to its real capture rate where the header is wrong. Returns the report.md path."""
+    to its real capture rate where the header is wrong; ``runtime``: ``--runtime`` settings for
+    the hyperbones methods (each run's record keeps the settings it ran with). Returns the
+    report.md path."""
+    parse_overrides(runtime)  # a bad setting fails before the first run, not after it
     runs = []
     combos = [(m, g, mo, b) for g in garments for b in bodies for mo in motions for m in methods]
     for method, garment, motion, body in tqdm(combos, desc="eval", disable=not progress):
         result = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices, hold=hold,
                                 checkpoint=checkpoint, device=device, source_fps=capture_rate(motion, source_fps),
-                                uv_resolution=uv_resolution)
+                                uv_resolution=uv_resolution, runtime=runtime)
         runs.append(result.metrics)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

@@ -47,14 +47,15 @@ class HemCurve:
 
 def hem_curves(methods: list[str], garment: str = "dress", motion: str = "walk", *, hold: float = 2.0,
                vertices: int | None = None, body: str | None = None, checkpoint: str | None = None,
-               device: str = "auto", source_fps: dict[str, float] | None = None) -> list[HemCurve]:
+               device: str = "auto", source_fps: dict[str, float] | None = None,
+               runtime: str | None = None) -> list[HemCurve]:
     the_body = body_for(BodyShape.parse(body))
     rate = capture_rate(motion, source_fps)
     stop = load_motion(motion, the_body, source_fps=rate).num_frames - 1  # the last frame the body moves into
     curves = []
     for method in methods:
         result = run_simulation(method, garment, motion, body, vertices=vertices, hold=hold, checkpoint=checkpoint,
-                                device=device, source_fps=rate)
+                                device=device, source_fps=rate, runtime=runtime)
         canonical = result.garment.vertices
         hem = torch.argsort(canonical[:, 2])[: max(1, int(HEM_FRACTION * len(canonical)))]
         track = result.garment_vertices[stop:, hem].double()  # (T',H,3) from the stop on

@@ -12,26 +12,28 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
-from hyperbones.runtime.simulator import FOLLOW, LOOSE_FOLLOW, Simulator
+from hyperbones.runtime.config import RAW
+from hyperbones.runtime.simulator import Simulator
 from hyperbones.training.trainer import pick_device
 
 
 class HyperBonesMethod:
     """Garment positions from the per-frame runtime: Module B once, then Module A per frame,
     with the garment following Module A's output, pushed out of the body and its edges pulled
-    back to length after each frame (``contact``; off: Module A's output as it is, the method
-    "hyperbones-raw")."""
+    back to length after each frame (``raw``: Module A's output as it is, the method
+    "hyperbones-raw"). ``runtime``: {setting: value} over the checkpoint's ``RuntimeConfig``."""
 
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor | None = None,
                  material: Material | None = None, checkpoint: str | Path | None = None, device: str = "auto",
-                 progress: bool = False, uv_resolution: int | None = None, contact: bool = True):
+                 progress: bool = False, uv_resolution: int | None = None, runtime: dict | None = None,
+                 raw: bool = False):
         self.device = pick_device(device)
-        self.name = "hyperbones" if contact else "hyperbones-raw"
+        self.name = "hyperbones-raw" if raw else "hyperbones"
         garment = replace(garment, material=material or garment.material)
-        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution, contact=contact,
-                                        follow=FOLLOW if contact else 1.0,
-                                        loose_follow=LOOSE_FOLLOW if contact else 1.0,
-                                        rest_vertices=[rest_vertices])
+        overrides = {**(runtime or {}), **(RAW if raw else {})}
+        self.simulator = Simulator.load([(garment, body)], checkpoint, self.device, uv_resolution,
+                                        overrides=overrides, rest_vertices=[rest_vertices])
+        self.runtime_config = self.simulator.config
         self.progress = progress
 
     def run(self, posed: PosedBody) -> torch.Tensor:

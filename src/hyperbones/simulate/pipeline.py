@@ -23,6 +23,7 @@ from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import load_motion
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
+from hyperbones.runtime.config import parse_overrides
 from hyperbones.simulate.evaluation import runaway_problem, sequence_metrics
 from hyperbones.simulate.garments import draped_garment
 from hyperbones.simulate.lbs import LbsMethod
@@ -42,7 +43,7 @@ def _hyperbones(*args, **kwargs):
 def _hyperbones_raw(*args, **kwargs):
     from hyperbones.simulate.hyperbones import HyperBonesMethod
 
-    return HyperBonesMethod(*args, contact=False, **kwargs)
+    return HyperBonesMethod(*args, raw=True, **kwargs)
 
 
 def _physics(*args, **kwargs):
@@ -77,18 +78,21 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
                    blend_in: int = 15, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
                    source_fps: float | None = None, progress: bool = False,
-                   uv_resolution: int | None = None) -> SimulationResult:
+                   uv_resolution: int | None = None, runtime: str | dict | None = None) -> SimulationResult:
     """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
 
     ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
     CUDA when present) apply to the learnt methods; LBS ignores them. ``source_fps`` is the
     real capture rate of a BVH clip whose header is wrong. ``uv_resolution``: the UV maps'
-    R for the hyperbones methods (default: the model's training one).
+    R for the hyperbones methods (default: the model's training one); ``runtime``: settings
+    (``--runtime`` text or a dict) over the checkpoint's ``RuntimeConfig``. The metrics record
+    the runtime settings used (``runtime``; None for methods without the runtime).
     """
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     if frames is not None and frames < 1:
         raise ParameterError(f"--frames must be >= 1, got {frames}")
+    overrides = parse_overrides(runtime)
     shape = BodyShape.parse(body)
     the_body = body_for(shape)
     the_motion = load_motion(motion, the_body, blend_in=blend_in, hold=hold, source_fps=source_fps)
@@ -97,7 +101,7 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
     cloth = Material.parse(material)
     draped, rest_vertices = draped_garment(garment, the_body, vertices=vertices, piece=piece, material=cloth)
     posed = the_body.pose(the_motion.joint_rotations, the_motion.root_translation)
-    extra = {"uv_resolution": uv_resolution} if method.startswith("hyperbones") else {}
+    extra = {"uv_resolution": uv_resolution, "runtime": overrides} if method.startswith("hyperbones") else {}
     solver = METHODS[method](draped, the_body, rest_vertices=rest_vertices, material=cloth, checkpoint=checkpoint,
                              device=device, progress=progress, **extra)
     start = time.perf_counter()
@@ -109,13 +113,19 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
     metrics.update({"frames": the_motion.num_frames, "ms_per_frame": 1000 * elapsed / the_motion.num_frames,
                     "method": method, "garment": garment if Path(garment).suffix == "" else Path(garment).name,
                     "garment_vertices": draped.num_vertices, "motion": the_motion.name, "body": shape.label(),
-                    "fps": the_motion.fps})
+                    "fps": the_motion.fps, "runtime": _runtime_record(solver)})
     problem = runaway_problem(metrics)
     if problem:
         warnings.warn(f"{method} on {metrics['garment']}, {metrics['motion']}: {problem}; its metrics mean little",
                       stacklevel=2)
     return SimulationResult(draped, garment_vertices, posed.vertices, the_body.faces,
                             posed.joint_positions, the_motion.fps, metrics, rest.vertex_masses.float())
+
+
+def _runtime_record(solver) -> dict | None:
+    """The runtime settings a method ran with (None for methods without the runtime)."""
+    config = getattr(solver, "runtime_config", None)
+    return None if config is None else config.as_dict()
 
 
 def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,

@@ -85,11 +85,16 @@ def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
     """Write the inference part of a training checkpoint (the weights' moving average when it
     keeps one, else the model; config, step) to ``out``, and beside it ``<out>.md``: the
     config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
-    and a summary of the log, both up to the checkpoint's step."""
+    and a summary of the log, both up to the checkpoint's step. A HyperBones model also keeps
+    the ``RuntimeConfig`` it is meant to run with (the checkpoint's, else the defaults)."""
     from hyperbones.training.summary import read_log, training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
     slim = {"model": payload.get("ema") or payload["model"], "config": payload["config"], "step": payload["step"]}
+    if "runtime" in payload["config"]:  # a HyperBones model: the runtime settings it ships with
+        from hyperbones.runtime.config import RuntimeConfig
+
+        slim["runtime_config"] = payload.get("runtime_config") or RuntimeConfig().as_dict()
     out = save_checkpoint(out, slim)
     log_dir = Path(checkpoint).parent / "tensorboard"
     if log_dir.exists():

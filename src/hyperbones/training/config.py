@@ -3,106 +3,136 @@
 A teacher config has three tables, ``[model]``, ``[data]`` and ``[train]``, with the fields
 of ``TrunkConfig``, ``DataConfig`` and ``TrainConfig``. A HyperBones (joint, phase 2) config
 adds ``[runtime]`` (``ModuleAConfig``) and ``[joint]`` (``JointConfig``); ``load_config``
-tells them apart by the ``[joint]`` table. Anything left out takes the default below.
-Unknown keys and wrongly typed values are errors that name the file.
+tells them apart by the ``[joint]`` table. Anything left out takes the default below, so a
+config file states only what differs; ``apply_overrides`` changes any field from the command
+line (``--set section.key=value``). Unknown keys and wrongly typed values are one-line errors
+that name the file or the option. Why the shipped configs differ from the defaults, and what
+what their runs found: ``docs/experiments/``.
 """
 
 from __future__ import annotations
 
 import tomllib
-from dataclasses import asdict, dataclass, field, fields
+from collections.abc import Iterable
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, get_args, get_origin, get_type_hints
+from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
-from hyperbones.errors import InputFileError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.models.module_a import ModuleAConfig
 from hyperbones.models.teacher import TrunkConfig
 
 TEMPLATE_NAMES = ("tshirt", "tshirt-open", "pants", "long-skirt", "dress", "tight-dress")
+EVAL_BODIES = ("gender=0.3,age=0.6,muscle=0.7,weight=0.3,height=0.6,proportions=0.4",
+               "gender=0.8,age=0.4,muscle=0.3,weight=0.8,height=0.3,proportions=0.6")
 
 
 @dataclass(frozen=True)
 class DataConfig:
-    """What the teacher trains on, and what is held out for evaluation.
-
-    templates / resolutions: garments (made on the default body, carried to each sampled
-        body along its surface) at these vertex counts.
-    train_clips / test_clips: CMU clip names under ``mocap_dir``; test clips are never
-        sampled. builtins: built-in motions also trained on.
-    test_bodies: held-out shapes ("k=v,..."); sampled bodies stay at least
-        ``test_body_margin`` (L2 over the six phenotype values) away from each.
-    hold_seconds: stillness appended to every training clip, so settling is learnt.
-    default_material_fraction: share of episodes with HOOD's default fabric; the others
-        draw μ, λ, k_b, ρ over HOOD's ranges.
-    start_noise: std (m) of the noise added to the LBS start; settle_dt: length (s) of the
-        first step of an episode, taken with the body held still.
-    airborne_fraction: share of episodes whose root gets free-fall hops added on top of
-        the clip (``training.data.ballistic_hops``), launched at ``hop_speeds`` (m/s, a
-        range): the clips hold a few tenths of a second of flight, too little to learn
-        that cloth falls at g once the body drops away from it.
-    drape: settle each carried garment on its body (``garment.drape``, cached on disk)
-        before use, as ``simulate`` and ``eval`` do: rollouts start from the drape, and
-        Module B's graph and the virtual bones' places are built on it (the bones' skinning
-        weights come from the rest shape either way). Off: on the carried garment,
-        which the first (settling) step of a rollout then drapes. The physics rest shape
-        is the carried garment either way.
-    """
+    """What the teacher trains on, and what is held out: a validation set (training clips ×
+    unseen bodies) for choices made after training, a test set (unseen clips × unseen bodies)."""
 
     templates: tuple[str, ...] = TEMPLATE_NAMES
+    """Garment templates trained on, each made on the default body and carried to every sampled body."""
     resolutions: tuple[int, ...] = (1500, 2500)
+    """Vertex counts each template is trained at, so the model is not tied to one mesh density."""
     mocap_dir: str = "../shared/data/mocap/cmu"
+    """Folder of the CMU BVH clips the clip lists name (relative to the folder the command runs in)."""
     train_clips: tuple[str, ...] = ("01_01", "02_01", "02_03", "05_06", "111_10", "16_07", "16_27", "69_53", "74_06")
+    """CMU clips (file stems under ``mocap_dir``) that training samples motions from."""
     test_clips: tuple[str, ...] = ("16_21", "16_35", "143_06")
+    """Held-out CMU clips: never sampled in training nor used to choose anything; the final numbers only."""
+    validation_clips: tuple[str, ...] = ("16_07", "02_03")
+    """Training clips (seen by training, a subset of ``train_clips``) that after-training choices are
+    made on: the validation set is these clips × ``validation_bodies``, bodies unseen in training."""
     source_fps: dict[str, float] = field(default_factory=lambda: {"74_06": 60.0, "143_06": 60.0})
+    """Real capture rate of clips whose BVH header says otherwise (CMU 74_06 and 143_06: 60 fps, headers 120)."""
     builtins: tuple[str, ...] = ("walk", "run", "jump", "turn", "idle", "arm-swing", "sit")
-    test_bodies: tuple[str, ...] = ("gender=0.3,age=0.6,muscle=0.7,weight=0.3,height=0.6,proportions=0.4",
-                                    "gender=0.8,age=0.4,muscle=0.3,weight=0.8,height=0.3,proportions=0.6")
+    """Built-in motions (``hyperbones motion``) trained on besides the clips."""
+    test_bodies: tuple[str, ...] = EVAL_BODIES
+    """Held-out body shapes ("key=value,..." over the six phenotype values), kept out of training."""
+    validation_bodies: tuple[str, ...] = EVAL_BODIES
+    """Body shapes of the validation set; they coincide with ``test_bodies`` (every after-training
+    choice so far was made on them), so validation and test share bodies but never clips."""
     test_body_margin: float = 0.25
+    """Least L2 distance (over the six phenotype values) of a sampled training body from each test body."""
     hold_seconds: float = 1.5
+    """Stillness appended to every training clip, so the model learns how cloth settles after the body stops."""
     default_material_fraction: float = 0.5
+    """Share of episodes with HOOD's default fabric; the others draw μ, λ, k_b, ρ over HOOD's ranges."""
     start_noise: float = 0.001
+    """Std (m) of the Gaussian noise added to an episode's LBS start."""
     settle_dt: float = 1.0 / 3.0
+    """Length (s) of an episode's first step, taken with the body held still, so the garment settles on it."""
     airborne_fraction: float = 0.0
+    """Share of episodes whose root gets free-fall hops (``training.data.ballistic_hops``): the clips
+    hold too little flight to learn that cloth falls at g once the body drops away from it."""
     hop_speeds: tuple[float, float] = (0.8, 2.2)
+    """Range (m/s) the hops' launch speeds are drawn from."""
     drape: bool = False
+    """Settle each carried garment on its body (``garment.drape``, cached) before use, as ``simulate``
+    and ``eval`` do: rollouts, Module B's graph and the bones' places start from the drape. Off: the
+    carried garment, which a rollout's first (settling) step drapes. The physics rest shape and the
+    bones' skinning weights come from the carried garment either way."""
+
+    def __post_init__(self) -> None:
+        seen_by_test = sorted(set(self.validation_clips) & set(self.test_clips))
+        if seen_by_test:
+            raise ParameterError(f"data.validation_clips {seen_by_test} are test clips; "
+                                 "validation must not see the test set")
+        # A config that trains on built-in motions alone (train_clips empty) has no clip to validate on.
+        untrained = sorted(set(self.validation_clips) - set(self.train_clips))
+        if self.train_clips and untrained:
+            raise ParameterError(f"data.validation_clips {untrained} are not in data.train_clips; "
+                                 "validation clips are training clips (set data.validation_clips too)")
 
 
 @dataclass(frozen=True)
 class TrainConfig:
-    """Optimisation (HOOD's: Adam 5e-5, grad-norm clip 1, collision weight ramp, rollouts 1 → 5).
-
-    init_from: a training checkpoint (path relative to the folder the command runs in) whose
-        teacher weights and input statistics a new run starts from, with a fresh optimiser and
-        step 0 (a joint checkpoint gives its Module C); its model section must match this
-        config's. A joint (phase 2) run started from a joint checkpoint (a training one or
-        an exported model) takes all of it, Modules A and B too (the moving average where
-        the checkpoint keeps one): a fine-tuning run. Empty: random initialisation.
-    learning_rate_halve_at: steps at which the learning rate halves (a staircase decay).
-    ema_decay: the checkpoint also keeps an exponential moving average of the weights with
-        this decay per step, and inference loads it (single steps of the one-step physics
-        loss move the weights noisily; the average rolls out more steadily). 0: none.
-    """
+    """Optimisation (HOOD's by default: Adam, grad-norm clip, collision-weight ramp, episodes 1 → 5 steps)."""
 
     steps: int = 100_000
+    """Optimiser steps of the run."""
     learning_rate: float = 5e-5
+    """Adam's learning rate (HOOD's)."""
     learning_rate_halve_at: tuple[int, ...] = ()
+    """Steps at which the learning rate halves (a staircase decay); empty: constant."""
     grad_clip: float = 1.0
+    """Gradient-norm clip of each step (HOOD's)."""
     collision_weight_start: float = 5e3
+    """Weight of the collision term at step 0, where HOOD's ramp starts."""
     collision_weight_end: float = 5e5
+    """Weight of the collision term once the ramp is over."""
     collision_ramp_steps: int = 50_000
+    """Steps of the geometric ramp from the start weight to the end weight; 0: the end weight throughout."""
     rollout_start: int = 1
+    """Simulation steps per episode at step 0."""
     rollout_max: int = 5
+    """Simulation steps per episode once the ramp is over."""
     rollout_ramp_steps: int = 20_000
+    """Steps over which episodes grow from ``rollout_start`` to ``rollout_max`` (0: ``rollout_max`` throughout),
+    so the model meets, and learns to pull back from, the states its own rollouts drift into."""
     checkpoint_every: int = 250
+    """Steps between checkpoints (``checkpoint.pt`` and ``optimizer.pt`` in the run folder; ``--resume`` reads them)."""
     log_every: int = 10
+    """Steps between TensorBoard log entries."""
     seed: int = 0
+    """Seed of the initial weights and the episode draws (each DDP process adds its rank)."""
     device: str = "auto"
+    """"auto" (CUDA when present), "cpu" or "cuda[:N]"."""
     init_from: str = ""
+    """Checkpoint a new run starts from (relative to the folder the command runs in), at step 0 with a fresh
+    optimiser: its teacher weights and input statistics (a joint checkpoint gives its Module C; a joint run
+    from a joint checkpoint also takes Modules A and B: fine-tuning). Its model section must match. Empty: random."""
     ema_decay: float = 0.999
+    """Per-step decay of the weights' moving average that checkpoints also keep and inference loads (single
+    steps of the one-step physics loss move the weights noisily; the average rolls out more steadily); 0: none."""
 
 
 @dataclass(frozen=True)
 class TeacherTrainingConfig:
+    """A teacher (phase 1) run: the trunk's size, the data and the optimisation."""
+
     model: TrunkConfig = TrunkConfig()
     data: DataConfig = DataConfig()
     train: TrainConfig = TrainConfig()
@@ -112,13 +142,12 @@ class TeacherTrainingConfig:
 
     @classmethod
     def from_dict(cls, values: dict[str, Any], source: str = "config") -> "TeacherTrainingConfig":
-        sections = {f.name: f.type for f in fields(cls)}
+        """From a file's tables or a checkpoint's saved dict; keys it lacks (older checkpoints) take the defaults."""
         hints = get_type_hints(cls)
-        unknown = set(values) - set(sections)
+        unknown = set(values) - set(hints)
         if unknown:
-            raise InputFileError(source, f"unknown section(s) {sorted(unknown)}; expected {sorted(sections)}")
-        built = {name: _build(hints[name], values.get(name, {}), f"{source} [{name}]") for name in sections}
-        return cls(**built)
+            raise InputFileError(source, f"unknown section(s) {sorted(unknown)}; expected {sorted(hints)}")
+        return cls(**{name: _build(hints[name], values.get(name, {}), name, source) for name in hints})
 
     @classmethod
     def load(cls, path: str | Path) -> "TeacherTrainingConfig":
@@ -131,54 +160,44 @@ class TeacherTrainingConfig:
 @dataclass(frozen=True)
 class JointConfig:
     """Phase 2 (paper Sec. 3.5): C keeps training on L_phys while A learns C's rollouts.
-
-    (Phase 2 starts from a phase-1 teacher run through ``train.init_from``: its weights start C
-    and the shared trunk.)
-    cache_size / rollout_frames: A's targets are C's states along ``cache_size`` whole
-        rollouts of ``rollout_frames`` frames each, from the LBS start through the clip
-        (no gradient); ``refresh_every`` steps the oldest is replaced by a new rollout of the
-        current C, so the targets improve with C. ``end_fraction`` of the rollouts end where
-        their clip ends (its hold), so A sees the cloth settle after the body stops.
-    frames_per_step: cached frames A is trained on per optimiser step.
-    position_scale: L_MSE and L_lap are taken in cm² (m² × 1e4) so that a centimetre of error
-        weighs about as much as the energies (joules) of the physics terms.
-    laplacian_weight / interpenetration_weight: λ_lap, λ_interp (paper 0.1; 0 = the ablation);
-        interpenetration_epsilon: ε (m).  physics_on_runtime: stretching, bending and
-        collision (L_phys's weights) on A's output too.
-    trunk_from_runtime: A's loss also trains the shared trunk through Module B (the paper's
-        joint training). Off by default, to keep the teacher's physics training as #4
-        measured it: one gradient-norm clip covers the whole step, and A's L_3D (median
-        148 cm² over the first 279 steps of a trial from the step-25000 teacher) is two
-        orders of magnitude above C's physics terms (~1 J). B's heads learn from A's loss
-        either way.
-    max_rise / max_gap: a rollout whose garment, over the last third of its frames, sits on
-        average more than ``max_rise`` (m) above its skinned pose, or more than ``max_gap``
-        (m, RMS over vertices) away from it, is not kept as a target (``training.rollouts``):
-        the teacher lets some garments creep up the body or slide off it, and A would learn
-        that as the garment's place. 0 turns a check off.
-    bank: a folder of saved rollouts (``hyperbones rollouts``); refreshes load from it
-        (rollouts not already cached) and simulate only when it has none left. Empty: none.
-    train_teacher: False freezes C and the shared trunk (the finished phase-1 teacher): a step
-        is then A's terms alone, on ``frames_per_step`` cached frames, and each cached
-        rollout's trunk latents are computed once. The CPU setting: C's own episode step
-        costs most of a joint step, and its weights no longer need to move.
-    """
+    A phase-2 run starts from a phase-1 teacher through ``train.init_from``."""
 
     cache_size: int = 16
+    """Whole teacher rollouts held at a time; C's states along them (no gradient) are A's targets."""
     rollout_frames: int = 150
+    """Frames of each cached rollout, from the LBS start through the clip."""
     refresh_every: int = 200
+    """Steps between replacing the oldest cached rollout by a new one, so A meets many identities and
+    its targets improve with C."""
     end_fraction: float = 0.3
+    """Share of rollouts that end where their clip ends (in its hold), so A sees the cloth settle."""
     frames_per_step: int = 1
+    """Cached frames A is trained on per optimiser step."""
     position_scale: float = 1e4
+    """Factor on L_MSE and L_lap (errors in m²); 1e4 takes them in cm², so a centimetre of error
+    weighs about as much as a joule of the physics terms."""
     laplacian_weight: float = 0.1
+    """λ_lap on the Laplacian of A's error (the paper's; 0: the ablation)."""
     interpenetration_weight: float = 0.1
+    """λ_interp on A's interpenetration term (the paper's; 0: the ablation)."""
     interpenetration_epsilon: float = 0.003
+    """ε (m) of the interpenetration term: A's vertices nearer the body than this are penalised."""
     physics_on_runtime: bool = True
+    """Also put L_phys's terms (stretching, bending, collision, with its weights) on A's output."""
     trunk_from_runtime: bool = False
+    """A's loss also trains the shared trunk through Module B (the paper's joint training). Off: B's heads
+    alone learn from it, so L_3D, far larger than C's physics terms, does not take over the trunk's gradient clip."""
     train_teacher: bool = True
+    """Off: C and the shared trunk stay frozen (a finished phase-1 teacher), a step is A's terms alone and each
+    cached rollout's trunk latents are computed once; the CPU setting, where C's own step costs the most."""
     max_rise: float = 0.0
+    """A rollout whose garment sits on average more than this (m) above its skinned pose over its last third
+    is not kept (``training.rollouts``): A would learn a garment creeping up the body as its place. 0: no check."""
     max_gap: float = 0.0
+    """The same for a garment more than this (m, RMS over vertices) from its skinned pose (slid off); 0: no check."""
     bank: str = ""
+    """Folder of saved teacher rollouts (``hyperbones rollouts``): refreshes load the ones not yet cached and
+    simulate only when none is left. Empty: every rollout is simulated as training goes."""
 
 
 @dataclass(frozen=True)
@@ -202,29 +221,86 @@ def load_config(path: str | Path) -> TeacherTrainingConfig:
     return kind.from_dict(values, str(path))
 
 
-def _build(kind, values: Any, where: str):
+Config = TypeVar("Config", bound=TeacherTrainingConfig)
+
+
+def apply_overrides(config: Config, overrides: Iterable[str] | None, source: str = "--set") -> Config:
+    """``config`` with each ``"section.key=value"`` of ``overrides`` applied (``--set``), checked as a file's.
+
+    The value is read as a TOML value (``100``, ``1e-4``, ``true``, ``["01_01", "02_01"]``) or else, and
+    always for a string field, as the bare text (``train.init_from=runs/teacher/checkpoint.pt``). The
+    overrides of a section are applied together, so ``data.train_clips`` and ``data.validation_clips``
+    can change in one call. ``None`` (no ``--set`` given) changes nothing. Problems are
+    ``ParameterError``s naming ``source`` and the override.
+    """
+    sections = get_type_hints(type(config))
+    changes: dict[str, dict[str, Any]] = {}
+    given: dict[str, list[str]] = {}
+    for text in overrides or ():
+        option = f"{source} {text}"
+        name, equals, raw = text.partition("=")
+        section, dot, key = name.strip().partition(".")
+        if not equals or not dot:
+            raise ParameterError(f"{option}: expected section.key=value")
+        if section not in sections:
+            raise ParameterError(f"{option}: unknown section {section!r}; known: {', '.join(sections)}")
+        keys = get_type_hints(sections[section])
+        if key not in keys:
+            raise ParameterError(f"{option}: unknown key {key!r} in [{section}]; known: {', '.join(keys)}")
+        if key in changes.get(section, {}):
+            raise ParameterError(f"{option}: {section}.{key} given twice")
+        try:
+            changes.setdefault(section, {})[key] = _coerce(keys[key], _parse_value(raw.strip(), keys[key]),
+                                                           f"{section}.{key}")
+        except _WrongType as error:
+            raise ParameterError(f"{option}: {error}") from None
+        given.setdefault(section, []).append(option)
+    built = {}
+    for section, values in changes.items():
+        try:
+            built[section] = replace(getattr(config, section), **values)
+        except ParameterError as error:
+            raise ParameterError(f"{' '.join(given[section])}: {error}") from None
+    return replace(config, **built)
+
+
+def _parse_value(raw: str, kind) -> Any:
+    try:
+        parsed = tomllib.loads(f"value = {raw}")
+    except tomllib.TOMLDecodeError:
+        return raw
+    if set(parsed) != {"value"} or (kind is str and not isinstance(parsed["value"], str)):
+        return raw
+    return parsed["value"]
+
+
+class _WrongType(ValueError):
+    """A value that does not fit its field; the caller says which file or option it came from."""
+
+
+def _build(kind, values: Any, section: str, source: str):
     if not isinstance(values, dict):
-        raise InputFileError(where.split(" [")[0], f"{where} must be a table")
+        raise InputFileError(source, f"[{section}] must be a table")
     hints = get_type_hints(kind)
     unknown = set(values) - set(hints)
     if unknown:
-        raise InputFileError(where.split(" [")[0], f"{where}: unknown key(s) {sorted(unknown)}; known: {sorted(hints)}")
-    return kind(**{key: _coerce(hints[key], value, f"{where}.{key}") for key, value in values.items()})
+        raise InputFileError(source, f"[{section}]: unknown key(s) {sorted(unknown)}; known: {sorted(hints)}")
+    try:
+        return kind(**{key: _coerce(hints[key], value, f"{section}.{key}") for key, value in values.items()})
+    except (_WrongType, ParameterError) as error:
+        raise InputFileError(source, str(error)) from None
 
 
 def _coerce(kind, value: Any, where: str):
     origin = get_origin(kind)
-    file = where.split(" [")[0]
     if origin is tuple:
-        item = get_args(kind)[0]
         if not isinstance(value, (list, tuple)):
-            raise InputFileError(file, f"{where} must be a list")
-        return tuple(_coerce(item, v, where) for v in value)
+            raise _WrongType(f"{where} must be a list, got {value!r}")
+        return tuple(_coerce(get_args(kind)[0], item, where) for item in value)
     if origin is dict:
         if not isinstance(value, dict):
-            raise InputFileError(file, f"{where} must be a table")
-        key_kind, value_kind = get_args(kind)
-        return {str(k): _coerce(value_kind, v, where) for k, v in value.items()}
+            raise _WrongType(f"{where} must be a table, got {value!r}")
+        return {str(k): _coerce(get_args(kind)[1], v, where) for k, v in value.items()}
     if kind is bool and isinstance(value, bool):
         return value
     if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
@@ -233,4 +309,4 @@ def _coerce(kind, value: Any, where: str):
         return value
     if kind is str and isinstance(value, str):
         return value
-    raise InputFileError(file, f"{where} must be {kind.__name__}, got {value!r}")
+    raise _WrongType(f"{where} must be {kind.__name__}, got {value!r}")

@@ -1,0 +1,171 @@
+"""Every setting of the per-frame runtime in one typed, frozen config.
+
+The runtime (``runtime.simulator``) takes Module A's output as a target, carries the
+garment from the last frame towards it, pushes it out of the body and pulls its edges back
+towards their rest lengths. Each knob of those steps is a field here, so that a checkpoint,
+``metrics.json`` and ``report.json`` say which values produced a result, and
+``--runtime key=value,...`` changes any of them without editing code. Why the defaults are
+what they are: ``docs/experiments/*runtime*.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, get_type_hints
+
+from hyperbones.errors import ParameterError
+from hyperbones.physics.energies import COLLISION_EPSILON
+
+
+@dataclass(frozen=True)
+class RuntimeConfig:
+    """The per-frame runtime's settings (lengths in metres, shares in (0, 1])."""
+
+    follow: float = 0.6
+    """Share of the way from the carried garment to Module A's output taken each frame by cloth on
+    the skin (1: Module A's output as it is); the cloth lags as a damped first-order system."""
+    loose_follow: float = 0.4
+    """The same share for loose cloth (``follow_far`` or more from the skin): it lags and settles later."""
+    carry_lag: float = 0.5
+    """Share of the character's last-but-one frame-to-frame motion in what carries loose cloth, so
+    it takes up the character's accelerations over two frames instead of one."""
+    follow_near: float = 0.01
+    """Cloth nearer the skin than this is carried by the skin under it (and follows with ``follow``)."""
+    follow_far: float = 0.04
+    """Cloth farther than this is carried rigidly with the character (and follows with
+    ``loose_follow``); between the two, both blend linearly."""
+    contact: bool = True
+    """Resolve contact with the posed body (push-out, untangling, edge projection); off: no body
+    is used at all (with both shares at 1 this is Module A alone, ``hyperbones-raw``)."""
+    contact_margin: float = COLLISION_EPSILON
+    """Vertices inside the body or nearer than this are pushed out to this distance from its surface."""
+    query_distance: float = 0.1
+    """How far from each garment vertex body faces are looked for in the first push-out of a frame."""
+    round_query_distance: float = 0.04
+    """The same after a projection round, which moves vertices by millimetres (a nearer bound lets
+    the BVH skip the far cloth)."""
+    push_rounds: int = 4
+    """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
+    inside the next one."""
+    plane_reach: float = 0.03
+    """Vertices this close to the skin keep to the outside of their face's plane while edges are
+    projected, and are the ones untangling looks at."""
+    contact_rounds: int = 2
+    """Rounds of edge projection then push-out per frame, each from the last round's nearest faces."""
+    untangle: bool = True
+    """After the first push-out, bring back vertices pushed out on a limb's far side from their
+    neighbours (only with the edge projection, whose edges say who the neighbours are)."""
+    untangle_cosine: float = 0.3
+    """A vertex whose skin normal points against the sum of its neighbours' (cosine below minus
+    this) is on the far side of a limb from them."""
+    projection_iterations: int = 5
+    """Local/global projective-dynamics steps per contact round (0: push-out only, no projection)."""
+    projection_anchor: float = 0.02
+    """How strongly each vertex keeps to its input position in the projection, against an edge's
+    weight of 1 (a weak anchor lets the garment wander frame after frame)."""
+    projection_stretch: float = 0.0
+    """Edges up to this fraction longer than at rest are left alone by the projection."""
+    projection_compression: float = 0.0
+    """Edges up to this fraction shorter than at rest are left alone by the projection."""
+
+    def __post_init__(self) -> None:
+        for item in fields(self):
+            value = getattr(self, item.name)
+            kind = get_type_hints(RuntimeConfig)[item.name]
+            if kind is bool:
+                if not isinstance(value, bool):
+                    raise ParameterError(f"runtime {item.name}={value!r} must be true or false")
+            elif isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+                raise ParameterError(f"runtime {item.name}={value!r} must be a finite number")
+            elif kind is int and not isinstance(value, int):
+                raise ParameterError(f"runtime {item.name}={value!r} must be a whole number")
+        for name in ("follow", "loose_follow"):
+            if not 0.0 < getattr(self, name) <= 1.0:
+                raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be in (0, 1]")
+        if not 0.0 <= self.carry_lag < 1.0:
+            raise ParameterError(f"runtime carry_lag={self.carry_lag!r} must be in [0, 1)")
+        if not 0.0 <= self.follow_near < self.follow_far:
+            raise ParameterError(f"runtime follow_near={self.follow_near!r} and follow_far={self.follow_far!r} "
+                                 "must satisfy 0 <= follow_near < follow_far")
+        for name in ("contact_margin", "query_distance", "round_query_distance", "plane_reach",
+                     "projection_anchor"):
+            if getattr(self, name) <= 0:
+                raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
+        if self.push_rounds < 1:
+            raise ParameterError(f"runtime push_rounds={self.push_rounds!r} must be >= 1")
+        for name in ("contact_rounds", "projection_iterations", "projection_stretch"):
+            if getattr(self, name) < 0:
+                raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be >= 0")
+        if not -1.0 <= self.untangle_cosine <= 1.0:
+            raise ParameterError(f"runtime untangle_cosine={self.untangle_cosine!r} must be in [-1, 1]")
+        if not 0.0 <= self.projection_compression < 1.0:
+            raise ParameterError(f"runtime projection_compression={self.projection_compression!r} must be in [0, 1)")
+
+    @property
+    def follows(self) -> bool:
+        """Whether the garment is carried from the last frame at all (either share below 1)."""
+        return self.follow < 1.0 or self.loose_follow < 1.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, values: dict[str, Any], source: str = "runtime config") -> "RuntimeConfig":
+        """The config of a stored dict (a checkpoint's); keys it lacks take the defaults."""
+        known = {item.name for item in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ParameterError(f"{source}: unknown runtime setting(s) {unknown}; known: {', '.join(sorted(known))}")
+        return cls(**values)
+
+    def with_overrides(self, text: str | None) -> "RuntimeConfig":
+        """This config with ``key=value,...`` (``--runtime``) applied: numbers, ``true``/``false``."""
+        return replace(self, **parse_overrides(text))
+
+
+def parse_overrides(text: str | dict[str, Any] | None) -> dict[str, Any]:
+    """``--runtime key=value,...`` (or such a dict) as {setting: value}, checked against the
+    fields' types and ranges (over the defaults), so a bad value fails before any work starts."""
+    if isinstance(text, dict):
+        text = ",".join(f"{key}={value}" for key, value in text.items())
+    if text is None or not text.strip():
+        return {}
+    hints = get_type_hints(RuntimeConfig)
+    values: dict[str, Any] = {}
+    for item in filter(None, (part.strip() for part in text.split(","))):
+        key, sep, raw = (s.strip() for s in item.partition("="))
+        if not sep:
+            raise ParameterError(f"--runtime: expected key=value, got {item!r}")
+        if key not in hints:
+            raise ParameterError(f"--runtime: unknown setting {key!r}; known: {', '.join(hints)}")
+        if key in values:
+            raise ParameterError(f"--runtime: {key!r} given twice")
+        values[key] = _parse_value(key, raw, hints[key])
+    try:
+        replace(RuntimeConfig(), **values)
+    except ParameterError as error:
+        raise ParameterError(f"--runtime: {error}") from None
+    return values
+
+
+def _parse_value(key: str, raw: str, kind) -> bool | int | float:
+    if kind is bool:
+        if raw.lower() in ("true", "1", "yes", "on"):
+            return True
+        if raw.lower() in ("false", "0", "no", "off"):
+            return False
+        raise ParameterError(f"--runtime: {key}={raw!r} must be true or false")
+    try:
+        number = float(raw)
+    except ValueError:
+        raise ParameterError(f"--runtime: {key}={raw!r} is not a number") from None
+    if kind is int:
+        if not number.is_integer():
+            raise ParameterError(f"--runtime: {key}={raw!r} must be a whole number")
+        return int(number)
+    return number
+
+
+RAW = {"follow": 1.0, "loose_follow": 1.0, "contact": False}
+"""The settings that turn the runtime into Module A alone (the method ``hyperbones-raw``)."""
