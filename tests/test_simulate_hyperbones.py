@@ -73,13 +73,30 @@ def test_simulator_load_and_module_a_alone(joint_checkpoint, body):
                                                  simulator.module_a.state_dict().values()))
 
 
-def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path):
+def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path, monkeypatch):
+    """--uv-resolution reaches the UV maps Module A runs on (the checkpoint was trained at
+    R = 16; without the option the maps keep that)."""
+    from hyperbones.geometry.uv_raster import UvRaster
+
+    built = []
+    build = UvRaster.build
+
+    def recording_build(cls, *args, **kwargs):
+        raster = build(*args, **kwargs)
+        built.append(raster.resolution)
+        return raster
+
+    monkeypatch.setattr(UvRaster, "build", classmethod(recording_build))
     out = tmp_path / "eval"
     assert main(["eval", "--methods", "lbs,hyperbones-raw", "--garments", "tshirt", "--motions", "walk",
-                 "--frames", "4", "--vertices", "1000", "--uv-resolution", "16", "--checkpoint", str(joint_checkpoint),
+                 "--frames", "4", "--vertices", "1000", "--uv-resolution", "32", "--checkpoint", str(joint_checkpoint),
                  "--device", "cpu", "--out", str(out), "--quiet"]) == 0
     methods = [run["method"] for run in json.loads((out / "report.json").read_text())]
     assert methods == ["lbs", "hyperbones-raw"]
+    assert built == [32]  # one identity's maps, for hyperbones-raw alone, at the resolution asked for
+    run_simulation("hyperbones-raw", "tshirt", "walk", vertices=1000, frames=2, checkpoint=str(joint_checkpoint),
+                   device="cpu")
+    assert built[1:] == [16]
 
 
 def test_the_shipped_model_loads_safely_and_beats_lbs_on_a_walk():
@@ -91,7 +108,7 @@ def test_the_shipped_model_loads_safely_and_beats_lbs_on_a_walk():
     shipped = sum(path.stat().st_size for path in SHIPPED_HYPERBONES.parent.glob("*.pt"))
     assert shipped < 30e6
     payload = load_checkpoint(SHIPPED_HYPERBONES)  # torch.load(weights_only=True)
-    assert payload["step"] > 0 and set(payload) == {"model", "config", "step"}
+    assert payload["step"] > 0 and set(payload) == {"model", "config", "step", "runtime_config"}
     assert hyperbones_payload()["config"]["runtime"]["num_bones"] == payload["config"]["runtime"]["num_bones"]
     assert not load_module_a().training
     ours = run_simulation("hyperbones", "dress", "walk", vertices=1500, frames=90, device="cpu")

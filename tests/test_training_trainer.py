@@ -127,14 +127,63 @@ def test_train_steps_checkpoint_and_resume(tmp_path, body):
         TeacherTrainer(wider, tmp_path / "stage-three", progress=False)
 
 
+# `hyperbones train` as the CLI runs it, with each rank writing its model's parameters when
+# training starts (after DDP's start-up broadcast) and when it closes.
+DDP_RANK_DUMPS = """
+import sys
+from pathlib import Path
+
+import torch
+
+from hyperbones.cli import main
+from hyperbones.training.trainer import TeacherTrainer
+
+out = Path(sys.argv[1])
+train, close = TeacherTrainer.train, TeacherTrainer.close
+
+
+def parameters(trainer):
+    return {name: value.detach().cpu().clone() for name, value in trainer.model.named_parameters()}
+
+
+def dumping_train(self):
+    torch.save(parameters(self), out / f"start-rank{self.rank}.pt")
+    return train(self)
+
+
+def dumping_close(self, finished=True):
+    torch.save(parameters(self), out / f"end-rank{self.rank}.pt")
+    close(self, finished)
+
+
+TeacherTrainer.train, TeacherTrainer.close = dumping_train, dumping_close
+sys.exit(main(sys.argv[2:]))
+"""
+
+
 def test_two_process_ddp_training(tmp_path, body):
+    """Two ranks on different episodes (seeds differ by rank) step together: they start from
+    rank 0's weights and end with the same weights, which moved."""
     config = tmp_path / "tiny.toml"
     config.write_text(TINY_TOML)
+    script = tmp_path / "train_dumping.py"
+    script.write_text(DDP_RANK_DUMPS)
+    dumps = tmp_path / "dumps"
+    dumps.mkdir()
     env = dict(os.environ, OMP_NUM_THREADS="1")
-    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
-               "-m", "hyperbones.cli", "train", "--config", str(config), "--out", str(tmp_path / "ddp"), "--quiet"]
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2", str(script),
+               str(dumps), "train", "--config", str(config), "--out", str(tmp_path / "ddp"), "--quiet"]
     done = subprocess.run(command, capture_output=True, text=True, env=env, timeout=600,
                           cwd=Path(__file__).resolve().parents[1])
     assert done.returncode == 0, done.stderr[-3000:]
-    assert load_checkpoint(tmp_path / "ddp" / "checkpoint.pt")["step"] == 3
+    payload = load_checkpoint(tmp_path / "ddp" / "checkpoint.pt")
+    assert payload["step"] == 3
     assert "trained to step 3" in done.stdout
+    start, end = ([torch.load(dumps / f"{when}-rank{rank}.pt", weights_only=True) for rank in (0, 1)]
+                  for when in ("start", "end"))
+    names = list(start[0])
+    assert names and set(end[0]) == set(end[1]) == set(start[1]) == set(names)
+    assert all(torch.equal(start[0][name], start[1][name]) for name in names)  # DDP's broadcast of rank 0's
+    assert all(torch.equal(end[0][name], end[1][name]) for name in names)  # the averaged gradients
+    assert any(not torch.equal(end[0][name], start[0][name]) for name in names)  # training moved them
+    assert all(torch.equal(end[0][name], payload["model"][name]) for name in names)  # rank 0 saved its own
