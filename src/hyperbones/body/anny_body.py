@@ -52,8 +52,8 @@ def anny_model():
     """The process-wide Anny model (``rig="cmu_mb"``, float32).
 
     The first construction on a machine builds Anny's cache (kept in ``ANNY_CACHE_DIR``
-    when set; ~15 s with ``anny_loading``'s reader, a minute with Anny's own); later ones
-    take a few seconds. Construct it once.
+    when set; faster with ``anny_loading``'s reader); later ones take a few seconds.
+    Construct it once.
     """
     from hyperbones.body import anny_loading
 

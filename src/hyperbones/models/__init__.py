@@ -1,1 +1,1 @@
-"""Neural modules: the shared MeshGraphNet trunk and the teacher (Module C) built on it."""
+"""Neural modules: the MeshGraphNet trunk and body–garment graph, the teacher (Module C), Modules A and B."""

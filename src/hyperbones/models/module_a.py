@@ -25,13 +25,11 @@ Bone-Net comes in two forms (``bone_net``):
     (a DeepSets layer). Its output for a bone depends on what the bone is, not on its index.
   - "global": the paper's single MLP on all bones' windows at once, one output slot per
     bone index. Bones are placed by farthest point sampling on each fitted garment, so
-    index b is a different place on every identity (across 16 bank rollouts, the same index
-    was the nearest bone of another identity of the same template for 1–4 % of the bones):
-    what this form learns for one bone slot does not carry to the same place on another
-    identity, only what all bones share (a common sag or lag) does.
-  On 8 fresh teacher rollouts both forms fit C about equally after a few thousand steps
-  (RMS 6.7–7.0 cm against 7.4 cm untrained); the per-bone form is the default because its
-  output does not depend on the bone order, count or garment resolution.
+    index b is a different place on every identity: what this form learns for one bone
+    slot does not carry to the same place on another identity, only what all bones share
+    (a common sag or lag) does.
+  The per-bone form is the default because its output does not depend on the bone order,
+  count or garment resolution (the comparison: docs/experiments/*-per-bone-bone-net.md).
 
 Corrections: the 6D rotation of each bone frame (first two columns of its rotation) gets
 Δ6D added before Gram–Schmidt (the paper's rule), its position Δt (the network's output in

@@ -1,4 +1,4 @@
-"""Motion: the Motion type, BVH import and retargeting, built-in clips."""
+"""Motion: the Motion type, BVH import and retargeting, foot lock, built-in clips, export."""
 
 from hyperbones.motion.builtin import BUILTINS, builtin_motion
 from hyperbones.motion.export import save_motion_npz

@@ -83,9 +83,9 @@ class Motion:
         The A-pose takes the motion's first heading and the canonical root height
         ``rest_root[2]``, so a garment draped on the canonical body can start from a rigid
         move of its drape. The transition arrives at the first frame with the motion's own
-        velocity, so nothing is kicked at the join (a clip that starts mid-run used to go from
-        standing to 3.5 m/s in one frame, a ~10 g jolt that outweighed the rest of the clip in
-        per-frame inertia):
+        velocity, so nothing is kicked at the join (otherwise a clip that starts mid-run goes
+        from standing to running speed in one frame, a jolt that outweighs the rest of the
+        clip in per-frame inertia):
 
         - the root accelerates from rest along the first frame's velocity v0 with speed
           v0·w(s) (w the smoothstep, s from 0 to 1 over the transition), so the A-pose stands

@@ -1,4 +1,4 @@
-"""Markdown tables of retarget fidelity and foot slip, for ``hyperbones check-retarget``."""
+"""Markdown tables of retarget fidelity and foot slip, for ``hyperbones check retarget``."""
 
 from __future__ import annotations
 

@@ -1,1 +1,1 @@
-"""Physics: cloth materials, energies (HOOD's), proximity to the body, metrics."""
+"""Physics: cloth materials and rest state, HOOD's energies, metrics, the teacher's strain limiting and contact."""

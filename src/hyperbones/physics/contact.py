@@ -4,21 +4,19 @@ on the side of the skin it came from.
 A limb that moves several centimetres in one frame (a running thigh: ~10 cm at 30 fps)
 sweeps into cloth in front of it. Pushing such a vertex to its nearest skin point sends it
 out of the back of the limb once it is more than half the limb's width deep, and the
-cloth it drags along tears (edges 5-10x their rest length on held-out runs and jumps).
-Instead each vertex that was near the skin before the step keeps the skin patch it was
-near: the face it was nearest to, at the face's new place, bounds it as a half-space, and
-the strain limiter enforces those half-spaces inside its sweeps, so the limit's pull and
-the contact push settle together rather than undoing each other
-(``StrainLimiter.project``).
+cloth it drags along tears. Instead each vertex that was near the skin before the step
+keeps the skin patch it was near: the face it was nearest to, at the face's new place,
+bounds it as a half-space, and the strain limiter enforces those half-spaces inside its
+sweeps, so the limit's pull and the contact push settle together rather than undoing each
+other (``StrainLimiter.project``).
 
 The limiter's pull itself draws cloth into the body where it wraps a limb: a stretched
 loop around a thigh shrinks into it. Such cloth was not near the skin before the step, so
 no tracked plane holds it, and a nearest-point push afterwards stretches the loop again.
 So after the limiter, cloth it left inside gets a plane of its own (its nearest face, at
 the margin) and the limiter runs again from there, for up to ``CONTACT_ROUNDS`` rounds;
-the slack then comes from the free cloth, as it would in a real garment. Teacher at step
-21750, dress on held-out clip 16_35: strain 8.10 J with one round, 1.29 J with 3, 0.35 J
-with 8 (LBS: 3.13 J); collision 0.20-0.23 % either way. A last nearest-point push catches
+the slack then comes from the free cloth, as it would in a real garment (the round count:
+docs/experiments/*-teacher-contact-rounds.md). A last nearest-point push catches
 what no plane covered.
 """
 

@@ -37,8 +37,8 @@ def dissection_order(positions: np.ndarray, adjacency: sparse.csr_matrix, leaf: 
     """Geometric nested dissection of a mesh graph: split at the median of the longest axis
     and number both halves (recursively) before their separator (the vertices of one half
     with a neighbour in the other). Sparse LU in this order fills in about as much as with
-    minimum degree but in dense blocks, and needs no ordering at each factorisation: on a
-    25k-vertex garment it factorises in 2.5 s instead of 4.5 s."""
+    minimum degree but in dense blocks, and needs no ordering at each factorisation
+    (timings: docs/experiments/*-drape-solver.md)."""
     order = []
 
     def dissect(nodes):

@@ -13,15 +13,11 @@ towards the band's edge in proportion to their inverse masses (pinned vertices d
 move), and averages the corrections a vertex receives over its edges (Jacobi), so the
 result does not depend on edge order and the loop runs over sweeps only. Both halves of a
 sweep are one sparse product each (edge vectors from positions, vertex moves from edge
-corrections), 1.6x faster on the CPU than gathers and scatters (2555-vertex dress: 40
-sweeps in 19 against 30 ms, one thread). The averaging
-under-relaxes: 40 sweeps pull the bulk of the error in without converging, and converging
-further does not pay (dress, 16_21: strain 0.40 J with 40 sweeps, 0.55 J with 100, 4.2 J
-with 100 sweeps over-relaxed by 1.5). Contact half-spaces
-(``physics.contact.ContactPlanes``) are enforced after every sweep, so the pull of the
-limit and the push out of the body settle together. Exact projections coloured
-Gauss-Seidel style were tried for the teacher and left a few triangles stretched 2-3x
-where a pull towards the body met the contact push (dress, 16_21: 2.4-5.1 J against 0.40 J).
+corrections). The averaging under-relaxes: ``LIMIT_ITERATIONS`` sweeps pull the bulk of the
+error in without converging. Contact half-spaces (``physics.contact.ContactPlanes``) are
+enforced after every sweep, so the pull of the limit and the push out of the body settle
+together. Sweep counts and the Gauss-Seidel variant that was rejected:
+docs/experiments/*-teacher-strain-limiter.md.
 """
 
 from __future__ import annotations

@@ -4,8 +4,8 @@ Skeleton -> bones: each bone sits on a garment vertex picked by farthest point s
 takes the body skinning weights of its nearest point on the skin (paper Sec. 3.1, after HOOD).
 Bones -> garment: initial weights W0 = softmax(−d_geo/σ) over the bones, with d_geo the
 geodesic distance along the garment (so the two sides of a thin panel do not couple through
-the body). They stay dense (V,B): with σ = 5 cm and ~10 cm between bones the 8 strongest bones
-of a vertex hold only 58–91 % of its weight on the templates, 32 hold 91–99 %, and one
+the body). They stay dense (V,B): with σ = 5 cm and ~10 cm between bones a vertex's weight is
+spread over many bones (docs/experiments/*-dense-bone-weights.md), and one
 (V,B) @ (B,12) product per frame costs less than gathering them.
 
 A bone's posed frame is rigid: the skinning blend Σ_k w_bk T_k of the joint transforms

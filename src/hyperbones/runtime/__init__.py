@@ -1,1 +1,1 @@
-"""Runtime tools: benchmarks (and, later, the per-frame simulator)."""
+"""The per-frame runtime: the Simulator, identity caches, contact push-out, edge projection, benchmarks."""

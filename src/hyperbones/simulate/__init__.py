@@ -1,1 +1,1 @@
-"""Simulation methods (LBS baseline; the neural ones follow) and the simulate / eval pipelines."""
+"""Simulation methods (LBS, teacher, physics, hyperbones) and the simulate / eval / check pipelines."""

@@ -1,4 +1,4 @@
-"""``hyperbones check-hem``: does the hem keep moving after the body stops?
+"""``hyperbones check hem``: does the hem keep moving after the body stops?
 
 Each method simulates a garment through a clip followed by a hold (the body stands still).
 The hem is the lowest 5 % of the canonical garment's vertices. Reported per method:

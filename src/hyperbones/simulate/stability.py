@@ -1,4 +1,4 @@
-"""``hyperbones check-teacher``: long-rollout stability and settling of a learnt method.
+"""``hyperbones check teacher``: long-rollout stability and settling of a learnt method.
 
 Two tables:
   - stability: every garment on each held-out clip, held still to a total of ``frames``

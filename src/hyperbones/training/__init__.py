@@ -1,1 +1,1 @@
-"""Training: typed configs, data sampling, losses, the trainer and its checkpoints."""
+"""Training: typed configs, episodes, losses, the teacher and phase-2 trainers, rollout banks, checkpoints."""

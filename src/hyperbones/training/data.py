@@ -5,7 +5,7 @@ Expensive parts are done once per process and reused by every episode:
     garments), with its LBS weights and a ``ShapeFollower`` that carries it to other shapes;
   - each clip is retargeted to the default body once, with a blend-in from the A-pose and
     a hold at the end.
-Per episode a new body shape takes ~20 ms; the garment is carried onto it (that carried
+Per episode a new body shape is cheap to make; the garment is carried onto it (that carried
 garment is its rest shape) and the clip's root path is scaled by the leg-length ratio.
 With ``data.drape`` the carried garment is also settled on the body (``draped_vertices``;
 seconds each, cached on disk).
