@@ -57,9 +57,9 @@ def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
     (["motion", "walk", "--blend-in", "-3", "--out", "x.npz"], "--blend-in"),
     (["motion", "walk"], "--out FILE.npz is required"),
     (["motion", "missing.bvh", "--out", "x.npz"], "missing.bvh: file not found"),
-    (["check-drape", "--templates", "tshirt,cape"], "unknown template(s) ['cape']"),
-    (["check-drape", "--resolutions", "2500,lots"], "--resolutions must be a comma list"),
-    (["check-drape", "--bodies", "weight=0.2;hight=1"], "unknown key 'hight'"),
+    (["check", "drape", "--templates", "tshirt,cape"], "unknown template(s) ['cape']"),
+    (["check", "drape", "--resolutions", "2500,lots"], "--resolutions must be a comma list"),
+    (["check", "drape", "--bodies", "weight=0.2;hight=1"], "unknown key 'hight'"),
 ])
 def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
     monkeypatch.chdir(tmp_path)
@@ -70,7 +70,7 @@ def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
 
 
 def test_check_drape_prints_a_row_per_drape(capsys):
-    code, out, _ = _run(capsys, "check-drape", "--templates", "tshirt", "--resolutions", "1500", "--bodies",
+    code, out, _ = _run(capsys, "check", "drape", "--templates", "tshirt", "--resolutions", "1500", "--bodies",
                         "weight=0.7", "--quiet")
     header, rule, *rows = out.strip().splitlines()
     assert code == 0 and header.startswith("| garment | vertices | body |") and rule.startswith("|---|")
@@ -122,5 +122,24 @@ def test_help_explains_commands(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])
     out = capsys.readouterr().out
-    for verb in ("demo", "motion", "render", "check-retarget"):
+    for verb in ("demo", "simulate", "eval", "bench", "motion", "render", "train", "check"):
         assert verb in out
+    with pytest.raises(SystemExit):
+        main(["check", "--help"])
+    out = capsys.readouterr().out
+    for check in ("retarget", "builtins", "drape", "teacher", "hem"):
+        assert check in out
+
+
+def test_help_takes_choices_and_defaults_from_the_code(capsys):
+    """The verbs' help lists the methods and templates the code has, and its defaults."""
+    from hyperbones.garment.templates import DEFAULT_VERTICES, TEMPLATES
+    from hyperbones.jobs.methods import METHODS
+    from hyperbones.motion.load import DEFAULT_BLEND_IN
+
+    with pytest.raises(SystemExit):
+        main(["simulate", "--help"])
+    out = " ".join(capsys.readouterr().out.split())
+    assert all(name in out for name in METHODS) and all(name in out for name in TEMPLATES)
+    assert f"(default: {DEFAULT_VERTICES})" in out and f"(default: {DEFAULT_BLEND_IN})" in out
+    assert "--runtime" in out and "--uv-resolution" in out

@@ -69,7 +69,7 @@ def test_bad_band_is_refused():
 
 def test_contact_planes_hold_inside_the_sweeps():
     """Cloth stretched over a plane it must stay on: the planes hold exactly, the band nearly."""
-    from hyperbones.physics.contact import ContactPlanes
+    from hyperbones.physics.contact_planes import ContactPlanes
 
     rest, faces = _grid()
     limiter = StrainLimiter.build(*_edges(rest, faces), torch.full((len(rest),), 1e-4),

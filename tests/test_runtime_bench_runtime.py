@@ -9,7 +9,7 @@ import torch
 from hyperbones.cli import main
 from hyperbones.errors import InputFileError
 from hyperbones.models.hyperbones import HyperBonesModel
-from hyperbones.runtime.bench_runtime import load_motion_npz
+from hyperbones.jobs.bench_runtime import load_motion_npz
 from hyperbones.runtime.identity import encode_identity
 from test_runtime_identity import SMALL
 
@@ -59,7 +59,7 @@ def test_bad_motion_file(tmp_path):
 
 def test_timed_blocks_time_the_frames_asked_for():
     from hyperbones.errors import ParameterError
-    from hyperbones.runtime.timing import timed_blocks
+    from hyperbones.jobs.timing import timed_blocks
 
     seen = []
     blocks = timed_blocks(seen.append, torch.device("cpu"), warmup=2, frames=3, late=10)

@@ -47,7 +47,7 @@ def walk(body):
     from hyperbones.garment.templates import make_template
     from hyperbones.motion.load import load_motion
     from hyperbones.runtime.identity import encode_identity
-    from hyperbones.runtime.simulator import hyperbones_from_checkpoint
+    from hyperbones.models.loading import hyperbones_from_checkpoint
 
     model = hyperbones_from_checkpoint(None, "cpu")
     garment = make_template("dress", body, 1000)
@@ -88,7 +88,7 @@ def test_push_rounds_change_the_output_in_creases(body):
     push-outs (``push_rounds`` > 1) bring it out. Points under the skin all over the body
     (fingers, armpits, crotch included) show it."""
     from hyperbones.geometry.proximity import BodyProximity
-    from hyperbones.runtime.contact import BodyContact
+    from hyperbones.runtime.push_out import BodyContact
 
     vertices, faces = body.rest_vertices, body.faces
     proximity = BodyProximity(faces)
@@ -116,7 +116,8 @@ def test_the_run_records_every_setting(tmp_path):
 
 
 def test_the_shipped_model_carries_its_runtime_config():
-    from hyperbones.runtime.simulator import hyperbones_payload, runtime_config_of
+    from hyperbones.models.loading import hyperbones_payload
+    from hyperbones.runtime.simulator import runtime_config_of
 
     assert runtime_config_of(hyperbones_payload()) == RuntimeConfig()
 

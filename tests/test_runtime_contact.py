@@ -6,8 +6,8 @@ import torch
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.runtime.config import RuntimeConfig
-from hyperbones.runtime.contact import BodyContact
-from hyperbones.runtime.isometry import EdgeProjection
+from hyperbones.runtime.push_out import BodyContact
+from hyperbones.runtime.edge_projection import EdgeProjection
 
 
 def test_points_inside_the_body_come_out_and_the_others_stay(body):

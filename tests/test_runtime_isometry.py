@@ -7,7 +7,7 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z
-from hyperbones.runtime.isometry import EdgeProjection
+from hyperbones.runtime.edge_projection import EdgeProjection
 from test_runtime_contact import _grid
 
 

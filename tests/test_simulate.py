@@ -11,9 +11,9 @@ from conftest import cmu_clip
 from hyperbones.cli import main
 from hyperbones.export import read_frames_npz, read_pc2
 from hyperbones.garment import TEMPLATES
-from hyperbones.simulate.garments import draped_garment
-from hyperbones.simulate.lbs import LbsMethod
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.garment.draped import draped_garment
+from hyperbones.rig.garment_skinning import LbsMethod
+from hyperbones.jobs.simulate import run_simulation
 
 METRIC_KEYS = {"edge_error_pct", "area_error_pct", "collision_pct", "collision_1mm_pct", "strain", "bending",
                "inertia", "gravity", "frames", "ms_per_frame", "method", "garment", "motion", "body"}

@@ -4,8 +4,8 @@ import pytest
 import torch
 
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.simulate.evaluation import RUNAWAY_SPEED, runaway_problem, sequence_metrics
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.physics.sequence_metrics import RUNAWAY_SPEED, runaway_problem, sequence_metrics
+from hyperbones.jobs.simulate import run_simulation
 
 
 def test_a_falling_or_nan_garment_is_reported_and_a_sound_one_is_not(body):
@@ -29,6 +29,6 @@ def test_a_falling_or_nan_garment_is_reported_and_a_sound_one_is_not(body):
 
 
 def test_run_simulation_warns_when_the_garment_runs_away(monkeypatch, body):
-    monkeypatch.setattr("hyperbones.simulate.evaluation.RUNAWAY_SPEED", 1e-3)
+    monkeypatch.setattr("hyperbones.physics.sequence_metrics.RUNAWAY_SPEED", 1e-3)
     with pytest.warns(UserWarning, match="lbs on long-skirt, walk: a garment vertex reached"):
         run_simulation("lbs", "long-skirt", "walk", None, frames=10, vertices=1500)

@@ -1,10 +1,10 @@
-"""check-hem: the hem after the body stops, for LBS (which stops with the body)."""
+"""check hem: the hem after the body stops, for LBS (which stops with the body)."""
 
 import torch
 from PIL import Image
 
 from hyperbones.cli import main
-from hyperbones.simulate.hem import HemCurve, hem_curves
+from hyperbones.jobs.hem import HemCurve, hem_curves
 
 
 def test_curve_measures():
@@ -19,7 +19,7 @@ def test_lbs_hem_stops_with_the_body(tmp_path, capsys):
     (curve,) = hem_curves(["lbs"], "dress", "walk", hold=1.0, vertices=1000)
     assert curve.times[-1] > 0.9 and curve.moving_for <= 1 / 30 + 1e-9
     out = tmp_path / "hem.png"
-    assert main(["check-hem", "--methods", "lbs", "--vertices", "1000", "--hold", "1", "--out", str(out)]) == 0
+    assert main(["check", "hem", "--methods", "lbs", "--vertices", "1000", "--hold", "1", "--out", str(out)]) == 0
     printed = capsys.readouterr().out
     assert "| lbs |" in printed and str(out.resolve()) in printed
     assert Image.open(out).size == (840, 480)

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from hyperbones.cli import main
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.joint import JointTrainer
 from test_training_joint import TINY_JOINT
@@ -59,7 +59,8 @@ def test_simulator_load_and_module_a_alone(joint_checkpoint, body):
     """The Python API: Simulator.load on (garment, body) pairs; load_module_a for Module A alone."""
     from hyperbones.garment.templates import make_template
     from hyperbones.motion.builtin import builtin_motion
-    from hyperbones.runtime.simulator import Simulator, load_module_a
+    from hyperbones.models.loading import load_module_a
+    from hyperbones.runtime.simulator import Simulator
 
     garment = make_template("tshirt", body, vertices=1000)
     simulator = Simulator.load([(garment, body), (garment, body)], joint_checkpoint)
@@ -102,8 +103,8 @@ def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path, monkeypatch):
 def test_the_shipped_model_loads_safely_and_beats_lbs_on_a_walk():
     """The package's trained model: small enough to ship, loadable without pickled code, the
     default of --method hyperbones, and better than skinning where the issue asks it to be."""
-    from hyperbones.runtime.simulator import hyperbones_payload, load_module_a
-    from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
+    from hyperbones.models.loading import hyperbones_payload, load_module_a
+    from hyperbones.models.loading import SHIPPED_HYPERBONES, load_checkpoint
 
     shipped = sum(path.stat().st_size for path in SHIPPED_HYPERBONES.parent.glob("*.pt"))
     assert shipped < 30e6

@@ -3,7 +3,7 @@
 import torch
 
 from hyperbones.geometry.proximity import BodyProximity
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.jobs.simulate import run_simulation
 
 
 def test_physics_rollout_hangs_still_and_stays_outside_the_body(body):
@@ -23,10 +23,10 @@ def test_physics_rollout_hangs_still_and_stays_outside_the_body(body):
 
 
 def test_each_frame_lowers_the_step_energy_below_the_explicit_guess(body):
-    from hyperbones.simulate.garments import draped_garment
-    from hyperbones.simulate.physics import PhysicsMethod
+    from hyperbones.garment.draped import draped_garment
+    from hyperbones.training.physics_method import PhysicsMethod
     from hyperbones.training.loss import physics_terms
-    from hyperbones.training.trainer import QUERY_DISTANCE
+    from hyperbones.physics.hard_contact import QUERY_DISTANCE
 
     garment, rest_vertices = draped_garment("tshirt", body, vertices=1000)
     method = PhysicsMethod(garment, body, rest_vertices, device="cpu", iterations=30)

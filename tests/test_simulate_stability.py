@@ -1,9 +1,9 @@
-"""Kinetic energy, vertex speeds and the check-teacher tables (run on the LBS method)."""
+"""Kinetic energy, vertex speeds and the check teacher tables (run on the LBS method)."""
 
 import torch
 
 from hyperbones.cli import main
-from hyperbones.simulate.evaluation import kinetic_energy, vertex_speeds
+from hyperbones.physics.sequence_metrics import kinetic_energy, vertex_speeds
 
 
 def test_kinetic_energy_of_uniform_motion():
@@ -16,7 +16,7 @@ def test_kinetic_energy_of_uniform_motion():
 
 
 def test_check_teacher_tables_on_lbs(body, capsys):
-    assert main(["check-teacher", "--method", "lbs", "--garments", "tshirt", "--vertices", "1000", "--frames", "60",
+    assert main(["check", "teacher", "--method", "lbs", "--garments", "tshirt", "--vertices", "1000", "--frames", "60",
                  "--hold", "1", "--quiet"]) == 0
     out = capsys.readouterr().out
     stability = next(line for line in out.splitlines() if line.startswith("| tshirt | walk |"))

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from hyperbones.cli import main
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.trainer import TeacherTrainer
 from test_training_trainer import TINY
@@ -55,7 +55,7 @@ def test_missing_checkpoint_is_a_one_line_error(tmp_path, capsys):
 
 
 def test_the_shipped_teacher_is_the_default_and_rolls_out(capsys):
-    from hyperbones.training.checkpoint import SHIPPED_TEACHER, load_checkpoint
+    from hyperbones.models.loading import SHIPPED_TEACHER, load_checkpoint
 
     payload = load_checkpoint(SHIPPED_TEACHER)
     assert payload["step"] == payload["config"]["train"]["steps"] and "optimizer" not in payload

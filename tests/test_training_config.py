@@ -165,7 +165,7 @@ def test_checkpoints_from_before_the_validation_split_load():
 @pytest.mark.parametrize("checkpoint, path", [("teacher.pt", "teacher-small.toml"),
                                               ("hyperbones.pt", "hyperbones-small.toml")])
 def test_shipped_checkpoints_were_trained_by_the_shipped_configs(checkpoint, path):
-    from hyperbones.training.checkpoint import load_checkpoint
+    from hyperbones.models.loading import load_checkpoint
 
     payload = load_checkpoint(CHECKPOINTS / checkpoint)
     config = load_config(CONFIGS / path)

@@ -38,7 +38,7 @@ def test_draped_identities_settle_the_carried_garment(body):
 
     from hyperbones.body.shape import BodyShape
     from hyperbones.physics.material import Material
-    from hyperbones.simulate.garments import cache_dir
+    from hyperbones.garment.draped import cache_dir
 
     config = DataConfig(templates=("tshirt-open",), resolutions=(1000,), train_clips=(), builtins=("idle",), drape=True)
     shape = BodyShape(gender=0.8, age=0.4, muscle=0.3, weight=0.8, height=0.3, proportions=0.6)

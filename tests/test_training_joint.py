@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from hyperbones.errors import InputFileError, ParameterError
-from hyperbones.training.checkpoint import load_checkpoint
+from hyperbones.models.loading import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig, JointConfig, TeacherTrainingConfig, load_config
 from hyperbones.training.joint import JointTrainer
 from hyperbones.training.loss import laplacian
@@ -59,7 +59,7 @@ def test_joint_steps_from_a_teacher_run(tmp_path, body):
     phase_one.train()
     phase_one.close()
 
-    from hyperbones.runtime.simulator import hyperbones_from_checkpoint
+    from hyperbones.models.loading import hyperbones_from_checkpoint
 
     with pytest.raises(InputFileError, match="a teacher checkpoint, not a HyperBones one"):
         hyperbones_from_checkpoint(teacher_run / "checkpoint.pt")

@@ -1,7 +1,7 @@
 """Module A can learn: the joint trainer's own steps, all on one cached frame of a rollout of
 the shipped teacher, fit that frame (a small model on a ~1000-vertex tshirt, on the CPU)."""
 
-from hyperbones.training.checkpoint import SHIPPED_TEACHER
+from hyperbones.models.loading import SHIPPED_TEACHER
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.joint import JointTrainer
 

@@ -10,9 +10,10 @@ from hyperbones.body.shape import BodyShape
 from hyperbones.physics.material import Material
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.identity import encode_identity
-from hyperbones.runtime.simulator import Simulator, hyperbones_payload
+from hyperbones.models.loading import hyperbones_payload
+from hyperbones.runtime.simulator import Simulator
 from hyperbones.training import joint
-from hyperbones.training.checkpoint import SHIPPED_HYPERBONES
+from hyperbones.models.loading import SHIPPED_HYPERBONES
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.joint import JointTrainer
 

@@ -9,10 +9,12 @@ import pytest
 import torch
 
 from hyperbones.errors import InputFileError, ParameterError
-from hyperbones.training.checkpoint import export_weights, load_checkpoint
+from hyperbones.models.loading import load_checkpoint
+from hyperbones.training.checkpoint import export_weights
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.loss import collision_weight_at
-from hyperbones.training.trainer import TeacherTrainer, learning_rate_at, rollout_length, teacher_from_checkpoint
+from hyperbones.models.loading import teacher_from_checkpoint
+from hyperbones.training.trainer import TeacherTrainer, learning_rate_at, rollout_length
 
 TINY = {"model": {"latent": 16, "blocks": 2},
         "data": {"templates": ["tshirt"], "resolutions": [1000], "train_clips": [], "builtins": ["walk"],

@@ -7,9 +7,6 @@ body stands on the ground: the rest mesh is lifted so its lowest vertex is at z 
 from __future__ import annotations
 
 import functools
-import os
-import sys
-import tempfile
 from dataclasses import dataclass
 
 import torch
@@ -17,34 +14,7 @@ import torch
 from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
 from hyperbones.body.skeleton import JOINT_NAMES, JOINT_INDEX, NUM_JOINTS, forward_kinematics, skinning_transforms
 from hyperbones.geometry.lbs import linear_blend_skinning
-
-
-# Printed by Warp's native library on every machine without a GPU: expected, not news.
-_EXPECTED_WARP_NOISE = ("Could not find or load the NVIDIA CUDA driver",)
-
-
-def _init_warp_quietly() -> None:
-    """Initialise Warp (Anny's kernels use it) without its banner or the no-GPU notice.
-
-    The notice comes from native code, so the process's stderr is captured at the file
-    descriptor level during ``wp.init()``; any other message is passed on.
-    """
-    import warp
-
-    warp.config.log_level = warp.LOG_ERROR
-    sys.stderr.flush()
-    saved = os.dup(2)
-    with tempfile.TemporaryFile(mode="w+b") as captured:
-        os.dup2(captured.fileno(), 2)
-        try:
-            warp.init()
-        finally:
-            os.dup2(saved, 2)
-            os.close(saved)
-        captured.seek(0)
-        for line in captured.read().decode(errors="replace").splitlines():
-            if line.strip() and not any(noise in line for noise in _EXPECTED_WARP_NOISE):
-                print(line, file=sys.stderr)
+from hyperbones.geometry.warp_setup import init_warp_quietly
 
 
 @functools.lru_cache(maxsize=1)
@@ -57,7 +27,7 @@ def anny_model():
     """
     from hyperbones.body import anny_loading
 
-    _init_warp_quietly()
+    init_warp_quietly()
     anny_loading.install()
     import anny
 

@@ -26,12 +26,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from hyperbones.body.anny_body import Body, _init_warp_quietly
+from hyperbones.body.anny_body import Body
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.obj_io import _read_text, clean_triangle_mesh, garment_from_arrays, read_obj
 from hyperbones.geometry.geodesic import mesh_components
+from hyperbones.geometry.warp_setup import init_warp_quietly
 
 HM08_VERTEX_COUNT = 19158
 
@@ -188,7 +189,7 @@ def makehuman_model():
     ``topology="makehuman"`` keeps all 19 158 hm08 vertices (helpers included) in file order
     (no unattached-vertex removal, no nudity edits), so mhclo indices address it directly.
     """
-    _init_warp_quietly()
+    init_warp_quietly()
     import anny
 
     model = anny.Anny(rig="cmu_mb", topology="makehuman").to(torch.float32)

@@ -91,11 +91,11 @@ class BodyProximity:
 
     def __init__(self, faces: torch.Tensor, device: str | torch.device | None = "cpu", sign: str = "auto"):
         """faces: (F,3) body triangles (counter-clockwise seen from outside); device: where Warp runs (None: faces' device)."""
-        from hyperbones.body.anny_body import _init_warp_quietly
+        from hyperbones.geometry.warp_setup import init_warp_quietly
 
         if sign not in SIGN_METHODS:
             raise ValueError(f"sign must be one of {SIGN_METHODS}, got {sign!r}")
-        _init_warp_quietly()
+        init_warp_quietly()
         self.device = torch.device(device) if device is not None else faces.device
         if self.device.type == "cuda" and self.device.index is None:
             self.device = torch.device("cuda", torch.cuda.current_device())

@@ -45,8 +45,8 @@ import roma
 import torch
 from torch import nn
 
-from hyperbones.errors import ParameterError
 from hyperbones.body.skeleton import NUM_JOINTS
+from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.motion.motion import heading_angle
 

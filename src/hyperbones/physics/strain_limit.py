@@ -14,7 +14,7 @@ move), and averages the corrections a vertex receives over its edges (Jacobi), s
 result does not depend on edge order and the loop runs over sweeps only. Both halves of a
 sweep are one sparse product each (edge vectors from positions, vertex moves from edge
 corrections). The averaging under-relaxes: ``LIMIT_ITERATIONS`` sweeps pull the bulk of the
-error in without converging. Contact half-spaces (``physics.contact.ContactPlanes``) are
+error in without converging. Contact half-spaces (``physics.contact_planes.ContactPlanes``) are
 enforced after every sweep, so the pull of the limit and the push out of the body settle
 together. Sweep counts and the Gauss-Seidel variant that was rejected:
 docs/experiments/*-teacher-strain-limiter.md.
@@ -23,14 +23,11 @@ docs/experiments/*-teacher-strain-limiter.md.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
 
 import torch
 
 from hyperbones.geometry.sparse import to_csr
-
-if TYPE_CHECKING:  # contact imports this module
-    from hyperbones.physics.contact import ContactPlanes
+from hyperbones.physics.contact_planes import ContactPlanes
 
 # The teacher's band: woven cloth stretches by a percent or so under its own weight and
 # buckles rather than compresses in-plane.
@@ -101,9 +98,9 @@ class StrainLimiter:
         return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),
                              self.edge_counts.to(device), self.stretch, self.compression, self.iterations)
 
-    def project(self, positions: torch.Tensor, contact: "ContactPlanes | None" = None) -> torch.Tensor:
+    def project(self, positions: torch.Tensor, contact: ContactPlanes | None = None) -> torch.Tensor:
         """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps; ``contact`` (a
-        ``physics.contact.ContactPlanes``), when given, is enforced after every sweep."""
+        ``physics.contact_planes.ContactPlanes``), when given, is enforced after every sweep."""
         low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
         x = positions
         for _ in range(self.iterations):

@@ -7,8 +7,8 @@ keeps only the last K frames of bone positions. Around it, each frame (``Runtime
 the garment is carried from where the last frame left it (loose cloth with the character,
 cloth on the skin with the skin) and goes a share of the way to Module A's output, which cuts
 the jerks Module A copies from the skeleton; given the posed bodies, it is then pushed out of
-them and its edges are pulled towards their rest lengths (``runtime.contact``,
-``runtime.isometry``). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
+them and its edges are pulled towards their rest lengths (``runtime.push_out``,
+``runtime.edge_projection``). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
@@ -23,13 +23,14 @@ from typing import TYPE_CHECKING
 import torch
 
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
-from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.errors import ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.models.module_a import ModuleA, ModuleAConfig, bone_codes, correct_bones, heading_frame
+from hyperbones.models.loading import hyperbones_payload, model_of
+from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.config import RuntimeConfig
+from hyperbones.runtime.edge_projection import EdgeProjection
 from hyperbones.runtime.identity import Identity
-from hyperbones.runtime.isometry import EdgeProjection
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
@@ -41,50 +42,11 @@ def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Ten
     return points @ transform[..., :3, :3].transpose(-1, -2) + transform[..., None, :3, 3]
 
 
-def hyperbones_payload(path=None, device: str | torch.device = "cpu") -> dict:
-    """A HyperBones checkpoint's payload (default: the shipped model), refusing a teacher's."""
-    from hyperbones.training.checkpoint import SHIPPED_HYPERBONES, load_checkpoint
-
-    if path is None:
-        if not SHIPPED_HYPERBONES.exists():
-            raise ParameterError("no trained HyperBones model ships with this version yet: train one with "
-                                 "`hyperbones train --config configs/hyperbones-small.toml` and pass --checkpoint FILE")
-        path = SHIPPED_HYPERBONES
-    payload = load_checkpoint(path, map_location=device)
-    if "runtime" not in payload["config"]:
-        raise InputFileError(path, "a teacher checkpoint, not a HyperBones one (its config has no [runtime] table)")
-    return payload
-
-
 def runtime_config_of(payload: dict) -> RuntimeConfig:
     """The runtime settings a HyperBones checkpoint was exported with (the defaults for one
     that stores none: training checkpoints and older exports)."""
     stored = payload.get("runtime_config")
     return RuntimeConfig() if stored is None else RuntimeConfig.from_dict(dict(stored), "checkpoint runtime_config")
-
-
-def _model_of(payload: dict, device: str | torch.device):
-    from hyperbones.models.hyperbones import HyperBonesModel
-
-    return HyperBonesModel.from_payload(payload).to(device)
-
-
-def hyperbones_from_checkpoint(path=None, device: str | torch.device = "cpu"):
-    """The ``HyperBonesModel`` (eval mode) of a joint training checkpoint or an exported one
-    (default: the shipped one). Building it imports the teacher (Warp); ``load_module_a``
-    is the light path for Module A alone."""
-    return _model_of(hyperbones_payload(path, device), device)
-
-
-def load_module_a(path=None, device: str | torch.device = "cpu") -> ModuleA:
-    """Module A alone from a HyperBones checkpoint (all the per-frame runtime needs with
-    identity caches; no teacher, Warp or Anny), in eval mode."""
-    payload = hyperbones_payload(path, device)
-    module = ModuleA(ModuleAConfig.from_dict(payload["config"]["runtime"]))
-    state = payload.get("ema") or payload["model"]
-    module.load_state_dict({name[len("runtime."):]: value for name, value in state.items()
-                            if name.startswith("runtime.")})
-    return module.to(device).eval()
 
 
 @dataclass
@@ -185,7 +147,7 @@ class Simulator:
         self.last_motion: torch.Tensor | None = None  # (N,4,4): the heading frames' world motion into it
         self.contact = None
         if body_faces is not None and config.contact:
-            from hyperbones.runtime.contact import BodyContact
+            from hyperbones.runtime.push_out import BodyContact
 
             projections = None
             if config.projection_iterations > 0:
@@ -211,7 +173,7 @@ class Simulator:
         from hyperbones.runtime.identity import encode_identity
 
         payload = hyperbones_payload(checkpoint, device)
-        model = _model_of(payload, device)
+        model = model_of(payload, device)
         with torch.no_grad():
             rests = rest_vertices or [None] * len(characters)
             if len(rests) != len(characters):

@@ -12,42 +12,11 @@ already seen. ``export_weights`` keeps what inference needs
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
-
 import torch
 
 from hyperbones.errors import InputFileError
 from hyperbones.io_utils import atomic_path
-
-SHIPPED_TEACHER = Path(__file__).resolve().parent.parent / "checkpoints" / "teacher.pt"
-"""The committed teacher (``hyperbones simulate --method teacher`` loads it by default)."""
-
-SHIPPED_HYPERBONES = SHIPPED_TEACHER.with_name("hyperbones.pt")
-"""The shipped HyperBones model (``--method hyperbones`` and ``Simulator.load`` default to it)."""
-
-
-def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
-    path = Path(path)
-    with atomic_path(path) as tmp:
-        torch.save(payload, tmp)
-    return path
-
-
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Load a checkpoint without executing pickled code; one-line errors name the file."""
-    path = Path(path)
-    if not path.exists():
-        raise InputFileError(path, "checkpoint not found")
-    try:
-        payload = torch.load(path, map_location=map_location, weights_only=True)
-    except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
-        raise InputFileError(path, f"not a hyperbones checkpoint ({type(error).__name__}: {str(error).splitlines()[0]})") from None
-    if not isinstance(payload, dict) or "model" not in payload or "config" not in payload:
-        raise InputFileError(path, "not a hyperbones checkpoint (no model state or config)")
-    if payload.get("ema"):
-        payload["ema"] = {**payload["model"], **payload["ema"]}  # entries left out equal the model's
-    return payload
-
+from hyperbones.models.loading import load_checkpoint, save_checkpoint
 
 def optimizer_path(checkpoint: str | Path) -> Path:
     """Where a training checkpoint's optimiser state is kept: ``optimizer.pt`` beside it."""
@@ -81,9 +50,9 @@ def load_optimizer_state(path: str | Path, payload: dict, map_location: str | to
     return state["optimizer"]
 
 
-def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
+def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path | None = None) -> Path:
     """Write the inference part of a training checkpoint (the weights' moving average when it
-    keeps one, else the model; config, step) to ``out``, and beside it ``<out>.md``: the
+    keeps one, else the model; config, step) to ``out``, and ``summary`` (default: ``<out>.md``): the
     config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
     and a summary of the log, both up to the checkpoint's step. A HyperBones model also keeps
     the ``RuntimeConfig`` it is meant to run with (the checkpoint's, else the defaults)."""
@@ -106,7 +75,7 @@ def export_weights(checkpoint: str | Path, out: str | Path) -> Path:
     else:
         text = "(no TensorBoard log beside the checkpoint)\n"
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
-    with atomic_path(out.with_suffix(".md")) as tmp:
+    with atomic_path(Path(summary) if summary else out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
                        f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{text}")
     return out

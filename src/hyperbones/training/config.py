@@ -19,10 +19,10 @@ from pathlib import Path
 from typing import Any, TypeVar, get_args, get_origin, get_type_hints
 
 from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.garment.templates import TEMPLATES
 from hyperbones.models.module_a import ModuleAConfig
 from hyperbones.models.teacher import TrunkConfig
 
-TEMPLATE_NAMES = ("tshirt", "tshirt-open", "pants", "long-skirt", "dress", "tight-dress")
 EVAL_BODIES = ("gender=0.3,age=0.6,muscle=0.7,weight=0.3,height=0.6,proportions=0.4",
                "gender=0.8,age=0.4,muscle=0.3,weight=0.8,height=0.3,proportions=0.6")
 
@@ -32,7 +32,7 @@ class DataConfig:
     """What the teacher trains on, and what is held out: a validation set (training clips ×
     unseen bodies) for choices made after training, a test set (unseen clips × unseen bodies)."""
 
-    templates: tuple[str, ...] = TEMPLATE_NAMES
+    templates: tuple[str, ...] = tuple(TEMPLATES)
     """Garment templates trained on, each made on the default body and carried to every sampled body."""
     resolutions: tuple[int, ...] = (1500, 2500)
     """Vertex counts each template is trained at, so the model is not tied to one mesh density."""

@@ -27,10 +27,12 @@ from hyperbones.body.anny_body import Body, body_for
 from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.garment.drape import drape
+from hyperbones.garment.draped import CACHE_VERSION as DRAPE_CACHE_VERSION
+from hyperbones.garment.draped import cache_dir
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
-from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.diffusion import diffuse, diffusion_steps
+from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, surface_points
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.cloth_graph import GarmentTopology
@@ -40,9 +42,7 @@ from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import GRAVITY
 from hyperbones.physics.material import Material, sample_material
 from hyperbones.physics.strain_limit import StrainLimiter
-from hyperbones.simulate.garments import CACHE_VERSION as DRAPE_CACHE_VERSION
-from hyperbones.simulate.garments import cache_dir
-from hyperbones.simulate.lbs import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
+from hyperbones.rig.garment_skinning import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
 from hyperbones.training.config import DataConfig
 
 TEMPLATE_CACHE_VERSION = 3

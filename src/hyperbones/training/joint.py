@@ -22,15 +22,16 @@ import torch
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.models.hyperbones import HyperBonesConfig, HyperBonesModel
+from hyperbones.models.loading import load_checkpoint
 from hyperbones.models.module_a import heading_frame
 from hyperbones.models.teacher import Teacher
+from hyperbones.physics.hard_contact import QUERY_DISTANCE
 from hyperbones.runtime.identity import apply_encoder
 from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
-from hyperbones.training.checkpoint import load_checkpoint
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.loss import collision_weight_at, runtime_terms
 from hyperbones.training.rollouts import RolloutCache
-from hyperbones.training.trainer import QUERY_DISTANCE, TeacherTrainer, check_sections
+from hyperbones.training.trainer import TeacherTrainer, check_sections
 
 INITIAL_ROLLOUTS = 4  # made before the first step; the cache then grows by one per refresh
 

@@ -27,7 +27,7 @@ from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.models.teacher import Teacher
 from hyperbones.physics.material import Material
 from hyperbones.runtime.identity import IdentityGeometry
-from hyperbones.simulate.teacher import TeacherMethod
+from hyperbones.runtime.teacher_method import TeacherMethod
 from hyperbones.training.config import JointConfig
 from hyperbones.training.data import Identity as PhysicsIdentity
 from hyperbones.training.data import TeacherData
@@ -233,7 +233,7 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     different seeds, or one process over several sessions, fill one bank."""
     from tqdm import tqdm
 
-    from hyperbones.training.trainer import teacher_from_checkpoint
+    from hyperbones.models.loading import teacher_from_checkpoint
 
     if count < 1:
         raise ParameterError("--count must be at least 1")

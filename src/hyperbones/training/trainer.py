@@ -6,7 +6,7 @@ LBS put inside the body pushed out to the collision margin), takes one
 long settling step with the body held still, then follows the motion for a rollout whose
 length grows from ``rollout_start`` to ``rollout_max`` steps over training. The loss is
 taken on each raw prediction; the state carried to the next step then gets the same strain
-limiting and hard contact as the runtime (``physics.contact.constrain_step``), so
+limiting and hard contact as the runtime (``physics.hard_contact.constrain_step``), so
 training sees the states inference does.
 
 Runs on one process, or on several under ``torchrun`` (DistributedDataParallel: gloo on
@@ -27,26 +27,17 @@ import torch
 import torch.distributed as dist
 from tqdm import tqdm
 
+from hyperbones.devices import pick_device
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.proximity import BodyProximity, push_outside
-from hyperbones.models.teacher import Teacher, TrunkConfig, teacher_step
-from hyperbones.physics.contact import constrain_step
+from hyperbones.models.loading import load_checkpoint, teacher_state
+from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.energies import COLLISION_EPSILON
-from hyperbones.training.checkpoint import load_checkpoint, load_optimizer_state, save_training_state
+from hyperbones.physics.hard_contact import QUERY_DISTANCE, constrain_step
+from hyperbones.training.checkpoint import load_optimizer_state, save_training_state
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.data import Episode, TeacherData
 from hyperbones.training.loss import collision_weight_at, physics_terms
-
-QUERY_DISTANCE = 0.1  # m: nearest body faces are looked for this far out
-
-
-def pick_device(name: str) -> torch.device:
-    if name == "auto":
-        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
-    if name.startswith("cuda") and not torch.cuda.is_available():
-        raise ParameterError(f"device {name!r} asked for, but CUDA is not available")
-    return torch.device(name)
-
 
 def learning_rate_at(step: int, config) -> float:
     """``config.learning_rate`` halved once for each of ``learning_rate_halve_at`` reached."""
@@ -299,24 +290,4 @@ def check_sections(path, payload: dict, config: TeacherTrainingConfig, sections:
                                  f"this config {mine[section]}")
 
 
-def teacher_state(payload: dict, average: bool = True) -> dict[str, torch.Tensor]:
-    """The teacher's state dict in a checkpoint's payload: the weights' moving average when
-    ``average`` and the checkpoint keeps one, else the weights; Module C's part of a joint
-    (HyperBones) checkpoint."""
-    state = (payload.get("ema") if average else None) or payload["model"]
-    if "runtime" in payload["config"]:
-        state = {name[len("teacher."):]: value for name, value in state.items() if name.startswith("teacher.")}
-    return state
-
-
-def teacher_from_checkpoint(path, device: str | torch.device = "cpu") -> tuple[Teacher, dict]:
-    """The teacher model (eval mode; the weights' moving average when the checkpoint keeps
-    one) and the checkpoint's payload. A joint (HyperBones) checkpoint gives its Module C."""
-    payload = load_checkpoint(path, map_location=device)
-    model = Teacher(TrunkConfig(**payload["config"]["model"])).to(device)
-    model.load_state_dict(teacher_state(payload))
-    model.eval()
-    return model, payload
-
-
-__all__ = ["TeacherTrainer", "learning_rate_at", "teacher_from_checkpoint", "teacher_state", "check_sections", "rollout_length"]
+__all__ = ["TeacherTrainer", "learning_rate_at", "check_sections", "rollout_length"]

@@ -4,7 +4,8 @@ skin it came from, inside the strain limiter's sweeps; pinned cloth stays; moves
 import torch
 
 from hyperbones.geometry.proximity import BodyProximity
-from hyperbones.physics.contact import CONTACT_ROUNDS, ContactPlanes, constrain_step
+from hyperbones.physics.contact_planes import ContactPlanes
+from hyperbones.physics.hard_contact import CONTACT_ROUNDS, constrain_step
 from hyperbones.physics.strain_limit import StrainLimiter
 
 MARGIN = 2e-3

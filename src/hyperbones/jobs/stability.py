@@ -15,9 +15,9 @@ from tqdm import tqdm
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.motion.load import capture_rate, load_motion
-from hyperbones.simulate.evaluation import kinetic_energy, runaway_problem
-from hyperbones.simulate.pipeline import run_simulation
+from hyperbones.physics.sequence_metrics import kinetic_energy, runaway_problem
 
 
 def stability_table(method: str, garments: list[str], motions: list[str], *, frames: int = 1000,

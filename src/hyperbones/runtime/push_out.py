@@ -66,7 +66,7 @@ class BodyContact:
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
         pushed out (and, with projections, ``contact_rounds`` times projected and pushed out)."""
-        from hyperbones.physics.contact import ContactPlanes
+        from hyperbones.physics.contact_planes import ContactPlanes
 
         config = self.config
         if bodies.shape[0] != len(self.proximities):

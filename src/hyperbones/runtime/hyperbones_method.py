@@ -10,11 +10,11 @@ import torch
 from tqdm import tqdm
 
 from hyperbones.body.anny_body import Body, PosedBody
+from hyperbones.devices import pick_device
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
 from hyperbones.runtime.config import RAW
 from hyperbones.runtime.simulator import Simulator
-from hyperbones.training.trainer import pick_device
 
 
 class HyperBonesMethod:

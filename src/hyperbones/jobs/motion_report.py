@@ -10,9 +10,9 @@ from hyperbones.body import BodyShape, body_for
 from hyperbones.body.skeleton import LIMB_SEGMENTS
 from hyperbones.geometry.rotations import rotation_angle_deg
 from hyperbones.motion.builtin import BUILTINS, builtin_motion
-from hyperbones.motion.ground import sole_points, still_frames
 from hyperbones.motion.bvh import read_bvh
 from hyperbones.motion.fidelity import retarget_report
+from hyperbones.motion.ground import sole_points, still_frames
 from hyperbones.motion.load import capture_rate
 from hyperbones.motion.retarget import retarget_bvh
 

@@ -11,9 +11,9 @@ al. 2014, "Projective Dynamics"):
 with a the input positions and d_e the current edge vector scaled to its rest length l_e
 (or clamped to a band around it). The local step sets every d_e at once; the global step is
 one solve with the constant matrix DᵀD + αI (D: the (E,V) edge-difference matrix), factorised
-once per garment. Contact half-spaces (``physics.contact.ContactPlanes``) are enforced after
+once per garment. Contact half-spaces (``physics.contact_planes.ContactPlanes``) are enforced after
 every solve. The solve runs on the CPU whatever the device of the positions. Measurements
-behind the defaults: ``docs/experiments/2026-11-27-runtime-contact-projection.md``.
+behind the defaults: ``docs/experiments/*-runtime-contact-projection.md``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from hyperbones.errors import ParameterError
-from hyperbones.physics.contact import ContactPlanes
+from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.runtime.config import RuntimeConfig
 
 

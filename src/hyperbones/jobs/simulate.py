@@ -17,45 +17,17 @@ import torch
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import ParameterError
-from hyperbones.garment.garment import Garment
 from hyperbones.export import UsdMesh, write_frames_npz, write_obj_sequence, write_pc2, write_usd
+from hyperbones.garment.draped import draped_garment
+from hyperbones.garment.garment import Garment
 from hyperbones.io_utils import atomic_path
-from hyperbones.motion.load import load_motion
+from hyperbones.jobs.methods import METHODS
+from hyperbones.motion.load import DEFAULT_BLEND_IN, load_motion
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
+from hyperbones.physics.sequence_metrics import runaway_problem, sequence_metrics
 from hyperbones.runtime.config import parse_overrides
-from hyperbones.simulate.evaluation import runaway_problem, sequence_metrics
-from hyperbones.simulate.garments import draped_garment
-from hyperbones.simulate.lbs import LbsMethod
 
-def _teacher(*args, **kwargs):
-    from hyperbones.simulate.teacher import TeacherMethod
-
-    return TeacherMethod(*args, **kwargs)
-
-
-def _hyperbones(*args, **kwargs):
-    from hyperbones.simulate.hyperbones import HyperBonesMethod
-
-    return HyperBonesMethod(*args, **kwargs)
-
-
-def _hyperbones_raw(*args, **kwargs):
-    from hyperbones.simulate.hyperbones import HyperBonesMethod
-
-    return HyperBonesMethod(*args, raw=True, **kwargs)
-
-
-def _physics(*args, **kwargs):
-    from hyperbones.simulate.physics import PhysicsMethod
-
-    return PhysicsMethod(*args, **kwargs)
-
-
-METHODS = {"lbs": LbsMethod, "teacher": _teacher, "hyperbones": _hyperbones, "hyperbones-raw": _hyperbones_raw,
-           "physics": _physics}
-"""Method name -> constructor(garment, body, rest_vertices=, material=, checkpoint=, device=, progress=);
-the result's ``run(posed_body)`` returns (T,V,3) garment positions."""
 GARMENT_COLOR = (0.25, 0.45, 0.8)
 GARMENT_DEPTH_OFFSET = 0.003  # m: the preview draws cloth on the skin over it (viz.preview.MeshSequence)
 
@@ -76,7 +48,7 @@ class SimulationResult:
 
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
-                   blend_in: int = 15, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
+                   blend_in: int = DEFAULT_BLEND_IN, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
                    source_fps: float | None = None, progress: bool = False,
                    uv_resolution: int | None = None, runtime: str | dict | None = None) -> SimulationResult:
     """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.

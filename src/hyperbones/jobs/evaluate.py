@@ -9,9 +9,9 @@ from pathlib import Path
 from tqdm import tqdm
 
 from hyperbones.io_utils import atomic_path
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.motion.load import capture_rate
 from hyperbones.runtime.config import parse_overrides
-from hyperbones.simulate.pipeline import run_simulation
 
 COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collision_pct", "ε_c % (d<0)"),
            ("collision_1mm_pct", "ε_c % (d<1mm)"), ("strain", "strain J"), ("bending", "bending J"),

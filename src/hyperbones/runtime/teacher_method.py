@@ -1,6 +1,6 @@
 """The teacher (Module C) as a simulation method: an autoregressive rollout over any length,
 each step one network call (``models.teacher.teacher_step``); the start, the settling step
-and the per-step strain limiting and contact are ``simulate.rollout.StepRollout``'s.
+and the per-step strain limiting and contact are ``runtime.teacher_rollout.StepRollout``'s.
 """
 
 from __future__ import annotations
@@ -10,15 +10,14 @@ from pathlib import Path
 import torch
 
 from hyperbones.body.anny_body import Body
+from hyperbones.devices import pick_device
 from hyperbones.errors import ParameterError
 from hyperbones.garment.garment import Garment
 from hyperbones.models.cloth_graph import GarmentTopology
+from hyperbones.models.loading import SHIPPED_TEACHER, teacher_from_checkpoint
 from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.material import Material
-from hyperbones.simulate.rollout import StepRollout
-from hyperbones.training.checkpoint import SHIPPED_TEACHER
-from hyperbones.training.config import DataConfig
-from hyperbones.training.trainer import pick_device, teacher_from_checkpoint
+from hyperbones.runtime.teacher_rollout import StepRollout
 
 
 class TeacherMethod(StepRollout):
@@ -29,11 +28,14 @@ class TeacherMethod(StepRollout):
     def __init__(self, garment: Garment, body: Body, rest_vertices: torch.Tensor, material: Material | None = None,
                  checkpoint: str | Path | None = None, device: str = "auto", progress: bool = False,
                  model: Teacher | None = None, settle_dt: float | None = None):
-        """``model`` (with ``settle_dt``, the length of the first step) rolls out a teacher in
-        memory, e.g. the one being trained; otherwise ``checkpoint`` (default: the shipped one)."""
+        """``model`` (with ``settle_dt``, the length of the first step, as its training data
+        config says) rolls out a teacher in memory, e.g. the one being trained; otherwise
+        ``checkpoint`` (default: the shipped one), whose config gives ``settle_dt``."""
         self.device = pick_device(device)
         if model is not None:
-            self.model, self.settle_dt = model, float(settle_dt if settle_dt is not None else DataConfig().settle_dt)
+            if settle_dt is None:
+                raise ParameterError("TeacherMethod(model=...) needs settle_dt (the training config's data.settle_dt)")
+            self.model, self.settle_dt = model, float(settle_dt)
         else:
             if checkpoint is None and not SHIPPED_TEACHER.exists():
                 raise ParameterError("no trained teacher ships with this version yet: train one with `hyperbones "

@@ -5,7 +5,7 @@ out to the collision margin), relaxed by one long settling step with the body he
 as every training episode starts; each later frame is one step t-1 -> t. Pinned vertices
 follow the body by LBS. After every step, as in training, strain limiting keeps each edge
 within a narrow band of its rest length while cloth that ended inside the body goes back
-out on the side of the skin it came from (``physics.contact.constrain_step``); the moves
+out on the side of the skin it came from (``physics.hard_contact.constrain_step``); the moves
 are kept as velocity. A method supplies only ``_step``.
 """
 
@@ -22,12 +22,12 @@ from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity, Nearest, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.contact import constrain_step
 from hyperbones.physics.energies import COLLISION_EPSILON
+from hyperbones.physics.hard_contact import QUERY_DISTANCE
+from hyperbones.physics.hard_contact import constrain_step
 from hyperbones.physics.material import Material
 from hyperbones.physics.strain_limit import StrainLimiter
-from hyperbones.simulate.lbs import garment_skin_weights
-from hyperbones.training.trainer import QUERY_DISTANCE
+from hyperbones.rig.garment_skinning import garment_skin_weights
 
 
 class StepRollout:

@@ -6,7 +6,7 @@ free vertices with L-BFGS, starting from the explicit guess x(t) + v(t).
 This is backward-Euler cloth by optimisation, as HOOD's self-supervision implies. It is
 slow (hundreds of energy evaluations per frame) and meant as the teacher's accuracy
 reference in ``hyperbones eval``, not for production. It shares the teacher's rollout
-(``simulate.rollout.StepRollout``: the settling step, strain limiting and contact after
+(``runtime.teacher_rollout.StepRollout``: the settling step, strain limiting and contact after
 every step), so the two differ only in how each step is found.
 """
 
@@ -17,12 +17,12 @@ from pathlib import Path
 import torch
 
 from hyperbones.body.anny_body import Body
+from hyperbones.devices import pick_device
 from hyperbones.garment.garment import Garment
 from hyperbones.physics.material import Material
-from hyperbones.simulate.rollout import StepRollout
+from hyperbones.runtime.teacher_rollout import StepRollout
 from hyperbones.training.config import DataConfig, TrainConfig
 from hyperbones.training.loss import physics_terms
-from hyperbones.training.trainer import pick_device
 
 SOLVER_ITERATIONS = 200  # L-BFGS iterations per frame; the energy still falls a little past 100
 

@@ -18,8 +18,8 @@ import torch
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
 from hyperbones.io_utils import atomic_path
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.motion.load import capture_rate, load_motion
-from hyperbones.simulate.pipeline import run_simulation
 
 HEM_FRACTION = 0.05
 STILL_SPEED = 0.02  # m/s: mean hem speed under which the hem counts as still

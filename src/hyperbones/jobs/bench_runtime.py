@@ -17,10 +17,12 @@ import numpy as np
 import torch
 
 from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.jobs.timing import BenchRecord, timed_blocks
+from hyperbones.models.loading import load_module_a
 from hyperbones.models.module_a import ModuleA, ModuleAConfig
+from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.identity import Identity
-from hyperbones.runtime.simulator import Simulator, load_module_a
-from hyperbones.runtime.timing import BenchRecord, timed_blocks
+from hyperbones.runtime.simulator import Simulator
 
 
 def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
@@ -39,15 +41,17 @@ def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
 
 def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | None = None,
                   uv_resolution: int | None = None, device: str = "cpu", batch: int = 1, frames: int = 60,
-                  warmup: int = 10, late: int | None = None) -> list[BenchRecord]:
+                  warmup: int = 10, late: int | None = None, runtime: str | None = None) -> list[BenchRecord]:
     """One record per identity cache: median ms per frame (for the whole batch) of ``Simulator.step``;
     with ``late``, a second record for the frames from ``late`` on (past the motion's end the
-    pose is held)."""
+    pose is held). ``runtime``: ``--runtime`` settings over the defaults (no body here, so
+    only the follow's matter)."""
     if batch < 1 or frames < 1 or warmup < 0:
         raise ParameterError("--batch and --frames must be >= 1, --warmup >= 0")
     the_device = torch.device(device)
     if the_device.type == "cuda" and not torch.cuda.is_available():
         raise ParameterError("--device cuda asked for, but CUDA is not available")
+    config = RuntimeConfig().with_overrides(runtime)
     rotations, roots = load_motion_npz(motion)
     trained = load_module_a(checkpoint) if checkpoint else None
     records = []
@@ -63,7 +67,7 @@ def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | N
             module_a = ModuleA(ModuleAConfig(num_bones=identity.bones.num_bones, hidden=hidden, layers=layers,
                                              uv_features=identity.vertex_features.shape[1],
                                              uv_resolution=resolution))
-        simulator = Simulator(module_a, [identity] * batch, the_device)
+        simulator = Simulator(module_a, [identity] * batch, the_device, config=config)
 
         def step(t: int) -> None:
             t = min(t, rotations.shape[0] - 1)  # past the motion's end: held at its last pose

@@ -9,18 +9,17 @@ the body is not part of a method's frame: it is shared by all methods and done b
 
 from __future__ import annotations
 
-import torch
 from tqdm import tqdm
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
+from hyperbones.devices import pick_device
 from hyperbones.errors import ParameterError
+from hyperbones.garment.draped import draped_garment
+from hyperbones.jobs.methods import METHODS
+from hyperbones.jobs.timing import BenchRecord, timed_blocks
 from hyperbones.motion.load import load_motion
 from hyperbones.runtime.config import parse_overrides
-from hyperbones.simulate.garments import draped_garment
-from hyperbones.simulate.pipeline import METHODS
-from hyperbones.runtime.timing import BenchRecord, timed_blocks
-from hyperbones.training.trainer import pick_device
 
 
 def bench(methods: list[str], garments: list[str], *, vertices: int | None = None, device: str = "auto",

@@ -1,0 +1,113 @@
+"""Training verbs: train (phase 1 or 2), export (the inference part of a run) and rollouts (phase 2's bank)."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+from hyperbones.cli import options
+from hyperbones.errors import InputFileError, ParameterError
+
+
+def run_train(args) -> int:
+    from hyperbones.training.config import HyperBonesTrainingConfig, apply_overrides, load_config
+    from hyperbones.training.joint import JointTrainer
+    from hyperbones.training.trainer import TeacherTrainer
+
+    config = apply_overrides(load_config(args.config), args.set)
+    kind = JointTrainer if isinstance(config, HyperBonesTrainingConfig) else TeacherTrainer
+    trainer = kind(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
+    try:
+        step = trainer.train()
+    except BaseException:
+        trainer.close(finished=False)
+        raise
+    trainer.close()
+    if trainer.is_main:
+        print(f"trained to step {step}; checkpoint {trainer.checkpoint_path.resolve()}, "
+              f"TensorBoard logs {(trainer.run_dir / 'tensorboard').resolve()}")
+    return 0
+
+
+def add_train(sub) -> None:
+    train = sub.add_parser("train", help="train the teacher (phase 1) or all of HyperBones (phase 2), self-supervised",
+                           description="Trains from a TOML config. A config with [model], [data], [train] trains the "
+                                       "teacher (Module C) on the physics energies (configs/teacher*.toml; under "
+                                       "torchrun on every process, DDP); one that also has [runtime] and [joint] "
+                                       "trains Modules A, B and C together from a teacher run "
+                                       "(configs/hyperbones*.toml, one process). Writes OUT/checkpoint.pt (atomic, "
+                                       "every train.checkpoint_every steps, config inside) and TensorBoard logs in "
+                                       "OUT/tensorboard. Every field is documented in hyperbones.training.config.")
+    train.add_argument("--config", required=True, help="TOML training config")
+    train.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
+                       help="override one config field, e.g. train.steps=500 or data.train_clips='[\"01_01\"]' "
+                            "(repeatable; the value is read as TOML, else as text)")
+    options.add_out(train, "run folder")
+    train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
+    train.add_argument("--max-steps", type=int, default=None, help="stop at this step (below train.steps)")
+    options.add_quiet(train)
+    train.set_defaults(func=run_train)
+
+
+def run_export(args) -> int:
+    from hyperbones.training.checkpoint import export_weights
+
+    path = export_weights(args.checkpoint, args.out, summary=args.summary)
+    print(f"wrote {Path(path).resolve()}")
+    return 0
+
+
+def add_export(sub) -> None:
+    export = sub.add_parser("export", aliases=["export-teacher"],
+                            help="keep only what inference needs from a training checkpoint (teacher or HyperBones)",
+                            description="Writes OUT (the weights' moving average + config + step, and for a "
+                                        "HyperBones model its RuntimeConfig; loads with weights_only) and OUT with "
+                                        ".md: the config, training wall time and a summary of the run's TensorBoard "
+                                        "log up to the checkpoint's step.")
+    export.add_argument("checkpoint", help="a run's checkpoint.pt")
+    options.add_out(export, "output .pt (model weights + config)")
+    export.add_argument("--summary", default=None,
+                        help="where to write the .md summary (default: beside --out; the shipped models' are in "
+                             "docs/checkpoints/)")
+    export.set_defaults(func=run_export)
+
+
+def run_rollouts(args) -> int:
+    from hyperbones.training.config import HyperBonesTrainingConfig, load_config
+    from hyperbones.training.rollouts import generate_bank
+
+    config = load_config(args.config)
+    if not isinstance(config, HyperBonesTrainingConfig):
+        raise InputFileError(args.config, "not a HyperBones (phase 2) config: it has no [joint] table")
+    out = args.out or config.joint.bank
+    if not out:
+        raise ParameterError("no --out, and the config's joint.bank is empty")
+    if args.templates:
+        templates = tuple(options.comma_list(args.templates))
+        unknown = sorted(set(templates) - set(config.data.templates))
+        if unknown:
+            raise ParameterError(f"--templates {', '.join(unknown)}: not among the config's data.templates "
+                                 f"({', '.join(config.data.templates)})")
+        config = replace(config, data=replace(config.data, templates=templates))
+    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet)
+    return 0
+
+
+def add_rollouts(sub) -> None:
+    rollouts = sub.add_parser("rollouts", help="simulate teacher rollouts into a bank for phase 2 (joint.bank)",
+                              description="Rolls the config's teacher (train.init_from) out over random training "
+                                          "identities and clip windows, as phase 2's cache does, and saves each "
+                                          "rollout (~1 MB) to the bank folder. Several processes with different "
+                                          "--seed values can fill one bank; the same seed goes on where it stopped.")
+    rollouts.add_argument("--config", required=True, help="HyperBones (phase 2) TOML config")
+    rollouts.add_argument("--out", default=None, help="bank folder (default: the config's joint.bank)")
+    rollouts.add_argument("--count", type=int, default=100, help="rollouts to add (default: 100)")
+    rollouts.add_argument("--seed", type=int, default=0, help="draw seed; one per process sharing a bank (default: 0)")
+    rollouts.add_argument("--templates", default=None,
+                          help="comma list: draw only these of the config's garment templates (default: all), "
+                               "to add rollouts of garments the model does worst on")
+    options.add_quiet(rollouts)
+    rollouts.set_defaults(func=run_rollouts)
+
+
+VERBS = (add_train, add_export, add_rollouts)

@@ -1,0 +1,16 @@
+"""The torch device a command runs on."""
+
+from __future__ import annotations
+
+import torch
+
+from hyperbones.errors import ParameterError
+
+
+def pick_device(name: str) -> torch.device:
+    """``auto``: CUDA when present, else the CPU; a CUDA device asked for without CUDA is an error."""
+    if name == "auto":
+        return torch.device("cuda" if torch.cuda.is_available() else "cpu")
+    if name.startswith("cuda") and not torch.cuda.is_available():
+        raise ParameterError(f"device {name!r} asked for, but CUDA is not available")
+    return torch.device(name)

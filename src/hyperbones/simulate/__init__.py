@@ -1,1 +1,0 @@
-"""Simulation methods (LBS, teacher, physics, hyperbones) and the simulate / eval / check pipelines."""
