@@ -49,6 +49,9 @@ def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
         assert _angles(positions, reference, LIMB_SEGMENTS[arm]).max() < 0.05
 
 
+CONFIGS = Path(__file__).resolve().parents[1] / "configs"
+
+
 @pytest.mark.parametrize("argv, phrase", [
     (["motion", "walk", "--body", "foo=1", "--out", "x.npz"], "--body: unknown key 'foo'"),
     (["motion", "walk", "--body", "weight=2", "--out", "x.npz"], "out of range"),
@@ -60,6 +63,12 @@ def test_motion_bvh_frame_i_is_time_i_over_fps(tmp_path, capsys):
     (["check", "drape", "--templates", "tshirt,cape"], "unknown template(s) ['cape']"),
     (["check", "drape", "--resolutions", "2500,lots"], "--resolutions must be a comma list"),
     (["check", "drape", "--bodies", "weight=0.2;hight=1"], "unknown key 'hight'"),
+    (["train", "--config", str(CONFIGS / "teacher-small.toml"), "--set", "train.stepz=3", "--out", "run"],
+     "--set train.stepz=3: unknown key 'stepz'"),
+    (["train", "--config", str(CONFIGS / "teacher-small.toml"), "--set", "train.steps=many", "--out", "run"],
+     "train.steps must be int"),
+    (["simulate", "--runtime", "follow=2", "--out", "run"], "--runtime: runtime follow=2.0 must be in (0, 1]"),
+    (["eval", "--split", "validation", "--motions", "walk", "--out", "run"], "--split sets the motions and bodies"),
 ])
 def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
     monkeypatch.chdir(tmp_path)

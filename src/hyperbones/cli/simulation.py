@@ -96,13 +96,25 @@ def add_simulate(sub) -> None:
 
 
 def run_eval(args) -> int:
-    from hyperbones.jobs.evaluate import evaluate
+    from hyperbones.jobs.evaluate import evaluate, split_set
 
-    bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
-    report = evaluate(options.comma_list(args.methods), options.comma_list(args.garments),
-                      options.comma_list(args.motions), bodies, args.out, frames=args.frames, vertices=args.vertices,
-                      hold=args.hold, checkpoint=args.checkpoint, device=args.device,
-                      source_fps=options.source_fps_pairs(args), progress=not args.quiet,
+    source_fps = options.source_fps_pairs(args)
+    if args.split:
+        if args.motions or args.bodies:
+            raise ParameterError("--split sets the motions and bodies: leave out --motions and --bodies")
+        data = None
+        if args.config:
+            from hyperbones.training.config import load_config
+
+            data = load_config(args.config).data
+        motions, bodies, rates = split_set(args.split, data)
+        source_fps = {**rates, **source_fps}
+    else:
+        motions = options.comma_list(args.motions or "walk,run")
+        bodies = [b.strip() for b in args.bodies.split(";")] if args.bodies else [None]
+    report = evaluate(options.comma_list(args.methods), options.comma_list(args.garments), motions, bodies, args.out,
+                      frames=args.frames, vertices=args.vertices, hold=args.hold, checkpoint=args.checkpoint,
+                      device=args.device, source_fps=source_fps, progress=not args.quiet,
                       uv_resolution=args.uv_resolution, runtime=args.runtime)
     print(report.read_text())
     print(f"wrote {report.resolve()} and {report.with_suffix('.json').resolve()}")
@@ -118,9 +130,16 @@ def add_eval(sub) -> None:
     options.add_device(evaluation)
     options.add_hold(evaluation)
     options.add_garments(evaluation, default="tshirt,dress,long-skirt,pants")
-    evaluation.add_argument("--motions", default="walk,run",
+    evaluation.add_argument("--motions", default=None,
                             help="comma list of motions, built-in names or .bvh files (default: walk,run)")
     evaluation.add_argument("--bodies", default=None, help="body shapes separated by ';' (default: the default body)")
+    evaluation.add_argument("--split", default=None, choices=("validation", "test"),
+                            help="the training config's data split instead of --motions and --bodies: validation "
+                                 "(data.validation_clips x validation_bodies) chooses settings, test (test_clips x "
+                                 "test_bodies) only reports (docs/validation.md)")
+    evaluation.add_argument("--config", default=None,
+                            help="training config whose [data] gives --split's clips and bodies (default: the "
+                                 "defaults in hyperbones.training.config)")
     evaluation.add_argument("--frames", type=int, default=None, help="only the first N frames of each motion")
     options.add_vertices(evaluation)
     options.add_out(evaluation, "output folder")

@@ -1,4 +1,5 @@
-"""Garments: the Garment type, OBJ / MakeHuman import, procedural templates, canonical drape."""
+"""Garments: the Garment type, OBJ / MakeHuman import, procedural templates, the drape and the
+draped-garment cache (``garment.draped``)."""
 
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.mhclo import list_pieces, load_mhclo_garment

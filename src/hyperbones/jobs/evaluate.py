@@ -8,6 +8,7 @@ from pathlib import Path
 
 from tqdm import tqdm
 
+from hyperbones.errors import ParameterError
 from hyperbones.io_utils import atomic_path
 from hyperbones.jobs.simulate import run_simulation
 from hyperbones.motion.load import capture_rate
@@ -16,6 +17,23 @@ from hyperbones.runtime.config import parse_overrides
 COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collision_pct", "ε_c % (d<0)"),
            ("collision_1mm_pct", "ε_c % (d<1mm)"), ("strain", "strain J"), ("bending", "bending J"),
            ("inertia", "inertia J"), ("gravity", "gravity J"), ("ms_per_frame", "ms/frame")]
+
+
+SPLITS = ("validation", "test")
+
+
+def split_set(split: str, data=None) -> tuple[list[str], list[str], dict[str, float]]:
+    """The motions (BVH paths), bodies and capture rates of a data split of the training
+    config's ``data`` section (default: the defaults): ``validation`` chooses settings,
+    ``test`` only reports (docs/validation.md)."""
+    from hyperbones.training.config import DataConfig
+
+    data = data or DataConfig()
+    if split not in SPLITS:
+        raise ParameterError(f"--split must be one of {', '.join(SPLITS)}, got {split!r}")
+    clips = data.validation_clips if split == "validation" else data.test_clips
+    bodies = data.validation_bodies if split == "validation" else data.test_bodies
+    return [str(Path(data.mocap_dir) / f"{clip}.bvh") for clip in clips], list(bodies), dict(data.source_fps)
 
 
 def evaluate(methods: list[str], garments: list[str], motions: list[str], bodies: list[str], out_dir: str | Path,

@@ -1,1 +1,2 @@
-"""Physics: cloth materials and rest state, HOOD's energies, metrics, the teacher's strain limiting and contact."""
+"""Physics: cloth materials and rest state, HOOD's energies, metrics of a simulated sequence, contact
+planes, the teacher's hard contact and strain limiting."""

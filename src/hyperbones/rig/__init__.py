@@ -1,1 +1,2 @@
-"""The virtual-bone rig of a garment on a body (skeleton -> bones -> garment)."""
+"""Rigs of a garment on a body: virtual bones (skeleton -> bones -> garment) and the garment's
+skinning to the body's own joints (the LBS method)."""

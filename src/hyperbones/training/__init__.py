@@ -1,1 +1,2 @@
-"""Training: typed configs, episodes, losses, the teacher and phase-2 trainers, rollout banks, checkpoints."""
+"""Training: typed configs, episodes, losses, the teacher and phase-2 trainers, rollout banks,
+training states and exports, and the physics reference method (it minimises the training loss)."""

@@ -8,7 +8,7 @@ import torch
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rot_z
 from hyperbones.runtime.edge_projection import EdgeProjection
-from test_runtime_contact import _grid
+from test_runtime_push_out import _grid
 
 
 def _edge_strain(projection, points):
