@@ -91,8 +91,8 @@ def add_teacher(checks) -> None:
                                 description="Rolls the method out for --frames frames on each motion (held still "
                                             "after it ends) and reports NaN, top speed and kinetic energy; then "
                                             "measures how the garment's kinetic energy decays after a clip stops.")
-    teacher.add_argument("--method", default="teacher", choices=options.method_names(),
-                         help="the method (default: teacher)")
+    teacher.add_argument("--method", default="teacher",
+                         help=f"one of {', '.join(options.method_names())} (default: teacher)")
     options.add_checkpoint(teacher)
     options.add_garments(teacher)
     teacher.add_argument("--motions", default="walk", help="comma list of motions for the long rollouts "

@@ -72,8 +72,8 @@ def add_simulate(sub) -> None:
     simulate = sub.add_parser("simulate", help="simulate a garment on a moving body and export it",
                               description="Writes DIR/frames.npz, garment.pc2, scene.usd, preview.mp4 and "
                                           f"metrics.json. Methods: {METHOD_HELP}.")
-    simulate.add_argument("--method", default="hyperbones", choices=options.method_names(),
-                          help="the method (default: hyperbones)")
+    simulate.add_argument("--method", default="hyperbones",
+                          help=f"one of {', '.join(options.method_names())} (default: hyperbones)")
     options.add_checkpoint(simulate)
     options.add_device(simulate)
     options.add_garment(simulate)
