@@ -3,7 +3,10 @@
 A training checkpoint holds the model state, the weights' moving average (only the entries
 that differ from the model's: a frozen part's average is its weights), the step and the
 config (as a plain dict); the optimiser's state sits beside it in ``optimizer.pt`` (older
-checkpoints hold it inside), so neither file outgrows the repository's file limit. A resumed
+checkpoints hold it inside), so neither file outgrows the repository's file limit. A save can
+be killed at any moment and still resume: the optimiser state of the new step is written as
+``optimizer.<step>.pt`` first, the checkpoint replaced next, and only then is it renamed to
+``optimizer.pt``; the pair the checkpoint names is on disk at every moment between. A resumed
 run re-seeds its episode sampler from the step, so it does not replay the episodes it has
 already seen. ``export_weights`` keeps what inference needs
 (model state + config + a training summary) for committing.
@@ -11,33 +14,64 @@ already seen. ``export_weights`` keeps what inference needs
 
 from __future__ import annotations
 
+import glob
+import os
 from pathlib import Path
+
 import torch
 
 from hyperbones.errors import InputFileError
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.loading import load_checkpoint, save_checkpoint
 
-def optimizer_path(checkpoint: str | Path) -> Path:
-    """Where a training checkpoint's optimiser state is kept: ``optimizer.pt`` beside it."""
-    return Path(checkpoint).with_name("optimizer.pt")
+def optimizer_path(checkpoint: str | Path, step: int | None = None) -> Path:
+    """Where a training checkpoint's optimiser state is kept: ``optimizer.pt`` beside it; with
+    ``step``, where a save stages that step's state until the checkpoint is replaced
+    (``optimizer.<step>.pt``)."""
+    return Path(checkpoint).with_name("optimizer.pt" if step is None else f"optimizer.{step}.pt")
 
 
 def save_training_state(path: str | Path, model: dict, ema: dict, optimizer: dict, step: int, config: dict) -> Path:
-    """Write a resumable training state: the optimiser's (``optimizer_path``) first, then the
-    checkpoint, each atomically; the moving average keeps only entries that differ from the model."""
+    """Write a resumable training state: the optimiser's, staged (``optimizer_path(path, step)``),
+    then the checkpoint, each atomically, then the staged state renamed to ``optimizer.pt``;
+    the moving average keeps only entries that differ from the model. What killed saves left
+    (temporary files, states staged for steps never reached) is removed at the end."""
     path = Path(path)
-    save_checkpoint(optimizer_path(path), {"optimizer": optimizer, "step": step})
+    staged = save_checkpoint(optimizer_path(path, step), {"optimizer": optimizer, "step": step})
     changed = {name: value for name, value in ema.items() if not torch.equal(value, model[name])}
-    return save_checkpoint(path, {"model": model, "ema": changed, "step": step, "config": config})
+    try:
+        save_checkpoint(path, {"model": model, "ema": changed, "step": step, "config": config})
+    except BaseException:
+        staged.unlink(missing_ok=True)  # the checkpoint stays at its last step, with that step's state
+        raise
+    os.replace(staged, optimizer_path(path))
+    _remove_leftovers(path)
+    return path
+
+
+def _remove_leftovers(path: Path) -> None:
+    """Staged optimiser states (``optimizer.<step>.pt``) and ``atomic_path``'s temporary files
+    (``.<stem>.<hex>.tmp<suffix>``) of checkpoint ``path`` and its optimiser state, left by saves
+    killed part way. Only the run's one writer (rank 0) saves, so none is being written now."""
+    kept = optimizer_path(path)
+    staged = [file for file in path.parent.glob(f"{kept.stem}.*{kept.suffix}")
+              if file.name[len(kept.stem) + 1:-len(kept.suffix)].isdigit()]
+    temporary = [*path.parent.glob(f".{kept.stem}.*.tmp{kept.suffix}"),
+                 *path.parent.glob(f".{glob.escape(path.stem)}.*.tmp{glob.escape(path.suffix)}")]
+    for leftover in staged + temporary:
+        leftover.unlink(missing_ok=True)
 
 
 def load_optimizer_state(path: str | Path, payload: dict, map_location: str | torch.device = "cpu") -> dict:
     """The optimiser state for checkpoint ``path`` whose ``payload`` is loaded: inside it
-    (older checkpoints), else from ``optimizer_path``, which must be from the same step."""
+    (older checkpoints), else from ``optimizer_path``, which must be from the same step; a save
+    killed between replacing the checkpoint and renaming its staged state leaves that state
+    under ``optimizer_path(path, step)``."""
     if "optimizer" in payload:
         return payload["optimizer"]
-    state_path = optimizer_path(path)
+    state_path = optimizer_path(path, payload["step"])
+    if not state_path.exists():
+        state_path = optimizer_path(path)
     if not state_path.exists():
         raise InputFileError(state_path, "missing: --resume needs the optimiser state saved beside the checkpoint")
     try:

@@ -102,7 +102,10 @@ class TeacherTrainer:
             from torch.utils.tensorboard import SummaryWriter
 
             self.run_dir.mkdir(parents=True, exist_ok=True)
-            self.writer = SummaryWriter(str(self.run_dir / "tensorboard"), purge_step=self.step or None)
+            # A resumed run drops what a killed one logged past its checkpoint (TensorBoard purges
+            # the steps from purge_step on); the checkpoint's own step stays.
+            self.writer = SummaryWriter(str(self.run_dir / "tensorboard"),
+                                        purge_step=self.step + 1 if self.step else None)
         self._episode: Episode | None = None
         self._k = 0
         self._state = None
@@ -264,6 +267,7 @@ class TeacherTrainer:
     def save(self) -> None:
         if not self.is_main:
             return
+        self.writer.flush()  # the log up to the checkpoint's step is on disk before the checkpoint is
         save_training_state(self.checkpoint_path, self.model.state_dict(), self.ema, self.optimizer.state_dict(),
                             self.step, self.config.as_dict())
 
