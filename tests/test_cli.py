@@ -83,10 +83,12 @@ def test_check_drape_prints_a_row_per_drape(capsys):
                         "weight=0.7", "--quiet")
     header, rule, *rows = out.strip().splitlines()
     assert code == 0 and header.startswith("| garment | vertices | body |") and rule.startswith("|---|")
-    assert len(rows) == 1
-    cells = [cell.strip() for cell in rows[0].strip("|").split("|")]
-    assert cells[0] == "tshirt" and cells[2] == "weight=0.7"
-    assert float(cells[4]) == 0.0 and float(cells[5]) < 3.0  # collision % after, edge error %
+    assert len(rows) == 2  # the default body first: the strain reference
+    default, heavier = ([cell.strip() for cell in row.strip("|").split("|")] for row in rows)
+    assert default[0] == heavier[0] == "tshirt" and default[2] == "default" and heavier[2] == "weight=0.7"
+    assert float(heavier[4]) == 0.0 and float(heavier[5]) < 3.0  # collision % after, edge error %
+    assert float(default[8]) == 1.0  # strain ÷ the default body's
+    assert abs(float(heavier[8].rstrip(" ✗")) - float(heavier[7]) / float(default[7])) < 0.02 * float(heavier[8].rstrip(" ✗"))
 
 
 def test_malformed_bvh_names_the_file(tmp_path, capsys):

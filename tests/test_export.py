@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.errors import InputFileError, OutputError, ParameterError
 from hyperbones.export import (UsdMesh, read_frames_npz, read_pc2, write_frames_npz,
                                write_obj_sequence, write_pc2, write_usd)
 from hyperbones.export import frames as frames_module
@@ -350,7 +350,7 @@ def half_writing_open(real_open=open):
 def test_pc2_failure_leaves_nothing(tmp_path, monkeypatch):
     vertices, _, _, _ = tube()
     monkeypatch.setattr(pc2_module, "open", half_writing_open(), raising=False)
-    with pytest.raises(DiskFull):
+    with pytest.raises(OutputError, match="No space left on device"):
         write_pc2(tmp_path / "cache.pc2", vertices)
     assert leftovers(tmp_path) == []
 
@@ -364,7 +364,7 @@ def test_frames_failure_keeps_previous_file(tmp_path, monkeypatch):
         raise DiskFull(28, "No space left on device")
 
     monkeypatch.setattr(frames_module.np, "savez", failing_savez)
-    with pytest.raises(DiskFull):
+    with pytest.raises(OutputError, match="No space left on device"):
         write_frames_npz(path, **frames_inputs())
     assert leftovers(tmp_path) == ["frames.npz"]
     assert path.read_bytes() == before
@@ -382,7 +382,7 @@ def test_obj_sequence_failure_leaves_nothing(tmp_path, monkeypatch):
         return real_block(line, points)
 
     monkeypatch.setattr(obj_module, "_vertex_block", failing_block)
-    with pytest.raises(DiskFull):
+    with pytest.raises(OutputError, match="No space left on device"):
         write_obj_sequence(tmp_path / "seq", vertices, faces, uvs=uvs, face_uvs=face_uvs)
     assert leftovers(tmp_path) == []
 
@@ -392,7 +392,7 @@ def test_obj_sequence_failure_leaves_nothing(tmp_path, monkeypatch):
     before = {p.name: p.read_bytes() for p in (tmp_path / "seq").iterdir()}
     calls.clear()
     monkeypatch.setattr(obj_module, "_vertex_block", failing_block)
-    with pytest.raises(DiskFull):
+    with pytest.raises(OutputError, match="No space left on device"):
         write_obj_sequence(tmp_path / "seq", vertices + 1.0, faces)
     assert {p.name: p.read_bytes() for p in (tmp_path / "seq").iterdir()} == before
 
@@ -409,13 +409,13 @@ def test_usd_failure_leaves_nothing(tmp_path, monkeypatch):
     monkeypatch.setattr(usd_module, "_define_mesh", failing_define)
     meshes = [UsdMesh("a", vertices, faces), UsdMesh("b", vertices, faces)]
     for suffix in (".usda", ".usdc"):
-        with pytest.raises(DiskFull):
+        with pytest.raises(OutputError, match="No space left on device"):
             write_usd(tmp_path / f"scene{suffix}", meshes)
     assert leftovers(tmp_path) == []
 
     target = tmp_path / "scene.usda"
     target.write_text("#usda 1.0\n")
-    with pytest.raises(DiskFull):
+    with pytest.raises(OutputError, match="No space left on device"):
         write_usd(target, meshes)
     assert leftovers(tmp_path) == ["scene.usda"]
     assert target.read_text() == "#usda 1.0\n"

@@ -121,3 +121,38 @@ def test_cloth_the_limiter_pulls_into_the_body_gets_planes_and_the_slack_comes_f
     one_pass, with_rounds = stretch(0), stretch(CONTACT_ROUNDS)
     assert one_pass[0] > 1.3  # the push after one pass stretches the snug side again
     assert with_rounds[0] < one_pass[0] - 0.1 and with_rounds[1] < one_pass[1]
+
+
+def test_the_work_per_step_is_bounded_whatever_the_input(body, monkeypatch):
+    """A bad case: a garment whose every vertex ends the step 3 cm inside the body without having
+    been near the skin before it (no tracked planes), its edges pulling it across the torso, so
+    that limiter passes leave cloth inside round after round. The step still does at most
+    1 + CONTACT_ROUNDS limiter passes (each of the limiter's fixed sweeps) and 2 + CONTACT_ROUNDS
+    body queries: the bound on the teacher's cost per frame."""
+    proximity = BodyProximity(body.faces)
+    proximity.update(body.rest_vertices)
+    v = body.rest_vertices
+    torso = torch.nonzero((v[:, 2] > 1.0) & (v[:, 2] < 1.35) & (v[:, 0].abs() < 0.12)).squeeze(1)[::7][:60]
+    positions = v[torso] - 0.03 * proximity.query(v[torso], max_distance=0.1).normal  # 3 cm under the skin
+    count = len(positions)
+    edges = torch.stack([torch.arange(count), torch.roll(torch.arange(count), 7)], dim=1)
+    limiter = StrainLimiter.build(edges, torch.full((count,), 1e-3), torch.full((count,), 1e-3),
+                                  torch.zeros(count, dtype=torch.bool))
+    calls = {"limiter": 0, "query": 0}
+    project, query = StrainLimiter.project, BodyProximity.query
+
+    def counted(name, function):
+        def wrapper(*args, **kwargs):
+            calls[name] += 1
+            return function(*args, **kwargs)
+        return wrapper
+
+    nearest_before = proximity.query(positions + 1.0, max_distance=0.1)  # a metre away before the step
+    assert not nearest_before.found.any()
+    monkeypatch.setattr(StrainLimiter, "project", counted("limiter", project))
+    monkeypatch.setattr(BodyProximity, "query", counted("query", query))
+    moved, _ = constrain_step(positions, torch.zeros_like(positions), limiter, proximity, nearest_before,
+                              v + 0.01, torch.ones(count, dtype=torch.bool), MARGIN, 0.1)
+    assert 2 <= calls["limiter"] <= 1 + CONTACT_ROUNDS  # a second pass ran for the cloth left inside
+    assert calls["query"] <= 2 + CONTACT_ROUNDS
+    assert torch.isfinite(moved).all()

@@ -15,16 +15,36 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it replaces ``path``, on error it is removed.
 
     The temporary name keeps the suffix, so libraries that pick a format from it still work.
+    A failure to write (read-only folder, full disk: an ``OSError``, or the ``RuntimeError``
+    torch.save gives for one) is raised as a one-line ``OutputError`` naming ``path``; then
+    ``path`` is as it was and the folders made for it are removed again.
     """
+    from hyperbones.errors import output_error
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    made = [folder for folder in (path.parent, *path.parent.parents) if not folder.exists()]
     tmp = path.with_name(f".{path.stem}.{uuid.uuid4().hex[:8]}.tmp{path.suffix}")
+    done = False
     try:
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as error:
+            raise output_error(path.parent, error) from None
         yield tmp
         os.replace(tmp, path)
+        done = True
+    except Exception as error:
+        failure = output_error(path, error)
+        if failure is None or failure is error:
+            raise
+        raise failure from error
     finally:
-        if tmp.exists():
-            tmp.unlink()
+        with contextlib.suppress(OSError):  # the original error matters more
+            tmp.unlink(missing_ok=True)
+        if not done:
+            for folder in made:  # deepest first; a folder something else wrote into stays
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
 
 
 def load_versioned(path: str | Path, what: str, version: int) -> dict:

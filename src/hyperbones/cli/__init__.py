@@ -8,7 +8,7 @@ import argparse
 import sys
 import warnings
 
-from hyperbones.errors import HyperbonesError
+from hyperbones.errors import HyperbonesError, is_output_fault
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -40,6 +40,14 @@ def main(argv: list[str] | None = None) -> int:
         return args.func(args)
     except HyperbonesError as error:
         print(f"hyperbones: error: {error}", file=sys.stderr)
+        return 2
+    except OSError as error:
+        # A writer outside hyperbones' own (TensorBoard's log, a folder made for a run) that the
+        # disk or the folder refused: the user's environment, not a bug.
+        if not is_output_fault(error):
+            raise
+        place = f"{error.filename}: " if error.filename else ""
+        print(f"hyperbones: error: {place}{error.strerror or error}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("hyperbones: interrupted", file=sys.stderr)

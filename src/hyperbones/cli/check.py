@@ -41,7 +41,7 @@ def add_builtins(checks) -> None:
 def run_drape(args) -> int:
     from hyperbones.body import BodyShape
     from hyperbones.garment.templates import TEMPLATES
-    from hyperbones.jobs.drape_report import HEADER, drape_rows
+    from hyperbones.jobs.drape_report import CORNER_BODIES, HEADER, drape_rows
 
     try:
         resolutions = [int(v) for v in options.comma_list(args.resolutions)]
@@ -51,7 +51,7 @@ def run_drape(args) -> int:
     unknown = sorted(set(templates) - set(TEMPLATES))
     if unknown:
         raise ParameterError(f"--templates: unknown template(s) {unknown}; available: {', '.join(TEMPLATES)}")
-    bodies = args.bodies.split(";")
+    bodies = args.bodies.split(";") if args.bodies is not None else list(CORNER_BODIES)
     for body in bodies:
         BodyShape.parse(body)  # a bad body fails before any drape, not after an hour of them
     print(HEADER, flush=True)
@@ -61,15 +61,19 @@ def run_drape(args) -> int:
 
 
 def add_drape(checks) -> None:
-    drape = checks.add_parser("drape", help="table of drape quality over garments, resolutions and bodies")
+    drape = checks.add_parser("drape", help="table of drape quality over garments, resolutions and bodies",
+                              description="Drapes every template (at each --resolutions) and every piece of the "
+                                          "given MakeHuman .mhclo files on the default body, then on each body, and "
+                                          "prints collision, edge/area error and strain against the rest shape; a "
+                                          "strain over twice the default body's is marked ✗.")
     drape.add_argument("mhclo", nargs="*", help="MakeHuman .mhclo garments to include (every piece)")
-    drape.add_argument("--resolutions", default="2500,5000,10000",
-                       help="template vertex counts (comma list; empty: no templates; default: 2500,5000,10000)")
+    drape.add_argument("--resolutions", default="1500",
+                       help="template vertex counts (comma list; empty: no templates; default: 1500)")
     drape.add_argument("--templates", default=",".join(options.template_names()),
                        help="procedural templates to include (comma list; empty: none; default: all)")
-    drape.add_argument("--bodies", default="gender=0,weight=0,height=0;gender=1,muscle=1,weight=1,height=1;"
-                       "gender=1,weight=0,height=0,proportions=1", help="body shapes separated by ';' (default: three "
-                                                                        "corners of the shape space)")
+    drape.add_argument("--bodies", default=None,
+                       help="body shapes separated by ';' (default: the eight corners of gender, weight, height in "
+                            "{0.1, 0.9}); the default body is always draped first, as the strain reference")
     options.add_quiet(drape)
     drape.set_defaults(func=run_drape)
 
@@ -139,11 +143,48 @@ def add_hem(checks) -> None:
     hem.set_defaults(func=run_hem)
 
 
+def run_long(args) -> int:
+    from hyperbones.jobs.long_run import TABLE_HEADER, long_run, table_row
+
+    methods = options.comma_list(args.methods)
+    printed = []
+
+    def report(record) -> None:  # each row as its run ends: a long check shows results as it goes
+        if not printed:
+            print(TABLE_HEADER, flush=True)
+            printed.append(True)
+        print(table_row(record), flush=True)
+
+    walk, _ = long_run(methods, args.garment, frames=args.frames, vertices=args.vertices, body=args.body,
+                       device=args.device, checkpoint=args.checkpoint, progress=not args.quiet, report=report)
+    print()
+    print(walk.describe())
+    return 0
+
+
+def add_long(checks) -> None:
+    long = checks.add_parser("long", help="table of speed, NaN, timing and memory over a long looping walk",
+                             description="Runs each method for --frames frames of the built-in walk made to loop "
+                                         "(one stretch of its steady gait repeated, the join smoothed), streaming "
+                                         "the frames, and prints per method: the fastest garment vertex, non-finite "
+                                         "positions, ms per frame (median, p95) and resident memory at frame 100 "
+                                         "and at the last frame.")
+    options.add_methods(long, default="hyperbones,teacher")
+    options.add_garment(long)
+    long.add_argument("--vertices", type=int, default=1500, help="template resolution in vertices (default: 1500)")
+    long.add_argument("--frames", type=int, default=10_000, help="frames per method (default: 10000)")
+    options.add_body(long)
+    options.add_device(long)
+    options.add_checkpoint(long)
+    options.add_quiet(long)
+    long.set_defaults(func=run_long)
+
+
 def add_check(sub) -> None:
-    check = sub.add_parser("check", help="diagnostic tables: retarget, builtins, drape, teacher, hem",
+    check = sub.add_parser("check", help="diagnostic tables: retarget, builtins, drape, teacher, hem, long",
                            description="Diagnostic jobs, each printing a markdown table.")
     checks = check.add_subparsers(dest="check_command", metavar="CHECK", required=True)
-    for add in (add_retarget, add_builtins, add_drape, add_teacher, add_hem):
+    for add in (add_retarget, add_builtins, add_drape, add_teacher, add_hem, add_long):
         add(checks)
 
 

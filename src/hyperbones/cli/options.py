@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from hyperbones.errors import ParameterError
+
 BODY_HELP = ("body shape as phenotype values in [0,1]: gender, age, muscle, weight, height, proportions, "
              "e.g. 'gender=0.2,weight=0.8' (default: all 0.5)")
 RUNTIME_HELP = ("runtime settings over the checkpoint's as key=value pairs, e.g. 'follow=0.5,untangle=false' "
@@ -99,21 +101,53 @@ def add_hold(parser: argparse.ArgumentParser, default: float = 0.0) -> None:
                         help=f"seconds of stillness appended to the motion (default: {default:g})")
 
 
+def parse_source_fps(text: str) -> float:
+    """``--source-fps FPS``: a capture rate in frames per second, within the BVH reader's range."""
+    from hyperbones.motion.bvh import MAX_FPS, MIN_FPS
+
+    try:
+        fps = float(text)
+    except ValueError:
+        raise ParameterError(f"--source-fps: expected a number of frames per second, got {text!r}") from None
+    if not MIN_FPS <= fps <= MAX_FPS:  # also refuses NaN
+        raise ParameterError(f"--source-fps: {text!r} is outside [{MIN_FPS:g}, {MAX_FPS:g}] frames per second")
+    return fps
+
+
+def parse_source_fps_pair(text: str) -> tuple[str, float]:
+    """``--source-fps CLIP=FPS``: a clip's file stem and its capture rate."""
+    name, equals, value = text.partition("=")
+    if not equals or not name.strip():
+        raise ParameterError(f"--source-fps: expected CLIP=FPS (e.g. 74_06=60), got {text!r}")
+    return name.strip(), parse_source_fps(value.strip())
+
+
+class _SourceFpsAction(argparse.Action):
+    """Parses the value itself: argparse reports a ``type=`` error after its usage lines, and the
+    CLI's errors are one line (``hyperbones: error: ...``, status 2)."""
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        try:
+            self.store(namespace, values)
+        except ParameterError as error:
+            parser.exit(2, f"hyperbones: error: {error}\n")
+
+    def store(self, namespace, text: str) -> None:
+        setattr(namespace, self.dest, parse_source_fps(text))
+
+
+class _SourceFpsPairsAction(_SourceFpsAction):
+    def store(self, namespace, text: str) -> None:
+        setattr(namespace, self.dest, [*(getattr(namespace, self.dest) or []), parse_source_fps_pair(text)])
+
+
 def add_source_fps(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--source-fps", type=float, default=None,
+    parser.add_argument("--source-fps", action=_SourceFpsAction, default=None, metavar="FPS",
                         help="BVH only: the real capture rate when the header is wrong (CMU 74_06, 143_06: 60)")
 
 
-def _source_fps_pair(text: str) -> tuple[str, float]:
-    name, _, value = text.partition("=")
-    try:
-        return name, float(value)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected CLIP=FPS, got {text!r}") from None
-
-
 def add_source_fps_pairs(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--source-fps", type=_source_fps_pair, action="append", metavar="CLIP=FPS",
+    parser.add_argument("--source-fps", action=_SourceFpsPairsAction, default=None, metavar="CLIP=FPS",
                         help="real capture rate of a BVH clip (by file stem) whose header is wrong, e.g. 74_06=60 "
                              "(repeatable; CMU 74_06 and 143_06 are 60 fps captures with 120 fps headers)")
 

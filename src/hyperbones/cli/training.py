@@ -50,10 +50,19 @@ def add_train(sub) -> None:
 
 
 def run_export(args) -> int:
+    from hyperbones.jobs.simulate import staged_outputs
     from hyperbones.training.checkpoint import export_weights
 
-    path = export_weights(args.checkpoint, args.out, summary=args.summary)
-    print(f"wrote {Path(path).resolve()}")
+    out = Path(args.out)
+    summary = Path(args.summary) if args.summary else out.with_suffix(".md")
+    # The weights and their summary appear together or not at all (each folder's set is staged).
+    with staged_outputs(out.parent) as staging:
+        if summary.parent.resolve() == out.parent.resolve():
+            export_weights(args.checkpoint, staging / out.name, summary=staging / summary.name)
+        else:
+            with staged_outputs(summary.parent) as summary_staging:
+                export_weights(args.checkpoint, staging / out.name, summary=summary_staging / summary.name)
+    print(f"wrote {out.resolve()} and {summary.resolve()}")
     return 0
 
 

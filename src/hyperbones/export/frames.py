@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import pickle
 import zipfile
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -98,15 +99,25 @@ def read_frames_npz(path: str | Path) -> dict:
             data = {key: archive[key] for key in archive.files}
     except FileNotFoundError:
         raise InputFileError(path, "no such file") from None
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile, pickle.UnpicklingError) as exc:
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile, pickle.UnpicklingError, zlib.error,
+            NotImplementedError, RuntimeError, MemoryError) as exc:
+        # zlib.error: a damaged deflated member; NotImplementedError: an unknown compression method;
+        # RuntimeError: a member flagged as encrypted; MemoryError: a header claiming a huge shape.
         raise InputFileError(path, f"not a readable .npz archive ({type(exc).__name__}: {exc})") from None
     missing = [key for key in FRAMES_KEYS if key not in data]
     if missing:
         raise InputFileError(path, f"missing frames.npz keys: {', '.join(missing)}")
+    for key in FRAMES_KEYS:  # e.g. a structured array, which even an empty faces array cannot be cast from
+        if data[key].dtype.kind not in "iuf":
+            raise InputFileError(path, f"{key} has dtype {data[key].dtype}, not a numeric one")
     try:
-        checked = _checked_arrays(*(data[key] for key in FRAMES_KEYS))
+        with np.errstate(over="ignore"):  # float64 beyond float32's range: refused just below
+            checked = _checked_arrays(*(data[key] for key in FRAMES_KEYS))
     except ParameterError as exc:
         raise InputFileError(path, str(exc)) from None
+    for key in ("garment_vertices", "body_vertices", "joint_positions"):
+        if not np.isfinite(checked[key]).all():  # finite float64 values beyond float32's range
+            raise InputFileError(path, f"{key} has values too large for float32")
     data.update(checked)
     data["fps"] = float(checked["fps"])
     return data

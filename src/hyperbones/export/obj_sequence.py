@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyperbones.errors import ParameterError
+from hyperbones.errors import ParameterError, output_error
 from hyperbones.export._checks import check_up, faces_array, frames_array, to_up, uv_arrays
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")
@@ -45,6 +45,7 @@ def write_obj_sequence(
     into a staging folder and are moved into place only once every frame is written; files
     ``name_NNNN.obj`` left in ``directory`` from an earlier, longer sequence are removed so
     that importers do not pick up stale frames. Other files in ``directory`` are untouched.
+    A folder that cannot be written (read-only, full disk) is an ``OutputError``.
     """
     if not isinstance(name, str) or not _NAME_RE.match(name):
         raise ParameterError(f"name must be letters, digits, '.', '_' or '-', got {name!r}")
@@ -64,21 +65,24 @@ def write_obj_sequence(
     tail = _static_tail(tris, uv)
     vertex_line = "v %.6f %.6f %.6f\n" * n_vertices
 
-    directory.parent.mkdir(parents=True, exist_ok=True)
     created = not directory.exists()
     staging_parent = directory.parent if created else directory
     staging = staging_parent / f".{directory.name}.{uuid.uuid4().hex[:8]}.tmp"
-    os.mkdir(staging)
     try:
+        directory.parent.mkdir(parents=True, exist_ok=True)
+        os.mkdir(staging)
         for index, file_name in enumerate(file_names):
             header = (f"# hyperbones {name} frame {index} of {n_frames}, metres, {up} up\n"
                       f"o {name}\n")
             text = header + _vertex_block(vertex_line, verts[index]) + tail
             (staging / file_name).write_bytes(text.encode("ascii"))
         _commit(staging, directory, created, file_names, name)
-    except BaseException:
+    except BaseException as error:
         shutil.rmtree(staging, ignore_errors=True)
-        raise
+        failure = output_error(directory, error) if isinstance(error, OSError) else None
+        if failure is None:
+            raise
+        raise failure from error
     return [directory / file_name for file_name in file_names]
 
 

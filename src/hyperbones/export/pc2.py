@@ -86,7 +86,8 @@ def read_pc2(path: str | Path) -> tuple[np.ndarray, float, float]:
     """Read a PC2 point cache: ``(vertices (T,V,3) float32, start_frame, sample_rate)``.
 
     Coordinates are returned as stored. Raises InputFileError for a missing or unreadable
-    file, a wrong signature, negative counts, or a file whose size does not match its header.
+    file, a wrong signature, negative counts, a file whose size does not match its header,
+    a non-finite start frame or non-positive sample rate, or NaN / infinite coordinates.
     """
     path = Path(path)
     try:
@@ -117,5 +118,11 @@ def read_pc2(path: str | Path) -> tuple[np.ndarray, float, float]:
             data = np.fromfile(f, dtype="<f4", count=n_samples * n_points * 3)
     except OSError as exc:
         raise InputFileError(path, f"cannot read: {exc.strerror or exc}") from None
+    if not np.isfinite(start) or not 0 < sample_rate < np.inf:
+        raise InputFileError(path, f"corrupt PC2 header: start frame {start}, sample rate {sample_rate}")
+    if not np.isfinite(data).all():
+        first = int(np.argmin(np.isfinite(data))) // 3
+        raise InputFileError(path, f"NaN or infinite coordinates (first at sample {first // max(n_points, 1)}, "
+                                   f"point {first % max(n_points, 1)})")
     vertices = data.astype(np.float32, copy=False).reshape(n_samples, n_points, 3)
     return vertices, float(start), float(sample_rate)

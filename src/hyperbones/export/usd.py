@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hyperbones.errors import ParameterError
+from hyperbones.errors import OutputError, ParameterError, stated_reason
 from hyperbones.export._checks import (check_positive, check_up, faces_array, frames_array, to_up,
                                        uv_arrays)
 from hyperbones.io_utils import atomic_path
@@ -67,9 +67,10 @@ def write_usd(
 
     ``up_axis="Y"`` converts the Z-up input, (x,y,z) -> (x,z,-y); ``meters_per_unit``
     other than 1 rescales the metre input into the stage unit (points / meters_per_unit).
-    All animated meshes must have the same number of frames. Written atomically.
+    All animated meshes must have the same number of frames. Written atomically; a stage that
+    cannot be written (read-only folder, full disk) is an ``OutputError``.
     """
-    from pxr import Sdf, Usd, UsdGeom
+    from pxr import Sdf, Tf, Usd, UsdGeom
 
     path = Path(path)
     if path.suffix.lower() not in USD_SUFFIXES:
@@ -81,8 +82,9 @@ def write_usd(
     n_frames = max((m.points.shape[0] for m in checked if m.points.ndim == 3), default=1)
 
     with atomic_path(path) as tmp:
-        stage = Usd.Stage.CreateNew(str(tmp))
+        stage = None
         try:
+            stage = Usd.Stage.CreateNew(str(tmp))
             root = UsdGeom.Xform.Define(stage, "/Root")
             stage.SetDefaultPrim(root.GetPrim())
             UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z if up_axis == "Z" else UsdGeom.Tokens.y)
@@ -93,9 +95,16 @@ def write_usd(
             stage.SetEndTimeCode(n_frames - 1)
             for mesh in checked:
                 _define_mesh(stage, mesh)
-            stage.GetRootLayer().Save()
+            saved = stage.GetRootLayer().Save()
+        except Tf.ErrorException as error:  # USD reports a file it cannot create or write in words
+            why = stated_reason(str(error), path.parent)
+            if why is None:
+                raise
+            raise OutputError(path, f"cannot write: {why}") from None
         finally:
             del stage  # release the layer before the file is renamed
+        if not saved:
+            raise OutputError(path, f"cannot write: {stated_reason('', path.parent) or 'USD did not save the stage'}")
     return path
 
 

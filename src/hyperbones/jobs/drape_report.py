@@ -1,7 +1,14 @@
-"""Drape quality over garments x resolutions x body shapes, for ``hyperbones check drape``."""
+"""Drape quality over garments x resolutions x body shapes, for ``hyperbones check drape``.
+
+Each garment is draped on the default body first: its strain there is the reference that
+the other bodies' strain is held against (a garment fitted to a body should rest on it about
+as relaxed as on the default one; a much larger strain means its fit, drape and rest shape
+disagree on that body, and every method downstream pulls against it).
+"""
 
 from __future__ import annotations
 
+import itertools
 import math
 import time
 from collections.abc import Iterable, Iterator
@@ -14,58 +21,63 @@ from hyperbones.garment.drape import drape
 from hyperbones.garment.mhclo import list_pieces, load_mhclo_garment
 from hyperbones.garment.templates import TEMPLATES, make_template
 from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.energies import stretching_energy
 
-CORNER_BODIES = ("gender=0,weight=0,height=0", "gender=1,muscle=1,weight=1,height=1",
-                 "gender=1,weight=0,height=0,proportions=1")
+CORNER_BODIES = tuple(f"gender={gender},weight={weight},height={height}"
+                      for gender, weight, height in itertools.product((0.1, 0.9), repeat=3))
+"""The eight corners of (gender, weight, height) in {0.1, 0.9}, the rest of the shape at 0.5."""
+STRAIN_FACTOR = 2.0  # a drape whose strain exceeds this many times the default body's is flagged
+
+HEADER = ("| garment | vertices | body | penetrating before | collision % after | edge error % | area error % | "
+          "strain J | strain ÷ default body's | force p95 | at rest | iterations | drape s |\n"
+          "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|")
 
 
-HEADER = ("| garment | vertices | body | penetrating before | collision % after | edge error % | "
-          "area error % | force p95 | force max | last step mm | at rest | iterations | make s | drape s |\n"
-          "|---|---:|---|---:|---:|---:|---:|---:|---:|---:|---|---:|---:|---:|")
+def _garments(templates: tuple[str, ...], resolutions: list[int], mhclo_files: list[Path], body) -> list[tuple]:
+    """(label, maker(body) -> Garment) for every template × resolution and MakeHuman piece."""
+    makers = [(name, lambda b, name=name, n=n: make_template(name, b, n)) for name in templates for n in resolutions]
+    for path in mhclo_files:
+        for piece in range(len(list_pieces(str(path), body))):
+            makers.append((f"{path.stem} piece {piece}",
+                           lambda b, path=path, piece=piece: load_mhclo_garment(str(path), b, piece=piece)))
+    return makers
 
 
 def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path],
                templates: Iterable[str] = tuple(TEMPLATES), progress: bool = True) -> Iterator[str]:
-    """One markdown row (see ``HEADER``) per garment and body, yielded as each drape ends:
-    collision % (d < 0) and edge/area error % after draping, and how close to rest the drape
-    got: the 95th percentile and maximum over free vertices of |∇E_i| / (m_i g), the longest
-    vertex move of its last Newton step, whether either met its tolerance, and its Newton
-    iterations."""
-    templates = tuple(templates)
-    jobs = [(name, n) for name in templates for n in resolutions]
-    jobs += [(str(path), None) for path in mhclo_files]
-    bar = tqdm(total=len(bodies) * (len(templates) * len(resolutions) + 2 * len(mhclo_files)),
-               desc="drape", disable=not progress)
-    for body_text in bodies:
-        body = body_for(BodyShape.parse(body_text))
+    """One markdown row (see ``HEADER``) per garment and body, yielded as each drape ends, the
+    default body's first: collision % (d < 0), edge/area error % and the strain energy (J)
+    of the drape against its rest shape, that strain over the default body's, and how close
+    to rest the drape got (95th percentile over free vertices of |∇E_i| / (m_i g), whether
+    it met its tolerance, Newton iterations)."""
+    shapes = [BodyShape()] + [shape for shape in map(BodyShape.parse, bodies) if shape != BodyShape()]
+    makers = _garments(tuple(templates), resolutions, mhclo_files, body_for(shapes[0]))
+    reference: dict[str, float] = {}
+    bar = tqdm(total=len(shapes) * len(makers), desc="drape", disable=not progress)
+    for shape in shapes:
+        body = body_for(shape)
         proximity = BodyProximity(body.faces)
         proximity.update(body.rest_vertices)
-        for source, resolution in jobs:
-            pieces = [None] if resolution else range(len(list_pieces(source, body)))
-            for piece in pieces:
-                start = time.perf_counter()
-                if resolution:
-                    garment = make_template(source, body, resolution)
-                    label = source
-                else:
-                    garment = load_mhclo_garment(source, body, piece=piece)
-                    label = f"{Path(source).stem} piece {piece}"
-                made = time.perf_counter()
-                draped, report = drape(garment, body)
-                took = time.perf_counter() - made
-                distance = proximity.query(draped.vertices, max_distance=0.5).signed_distance
-                collision = 100.0 * float((distance < 0).float().mean())
-                bar.update(1)
-                yield (f"| {label} | {garment.num_vertices} | {body.shape.label()} | {report.penetrating_before} | "
-                       f"{collision:.3f} | {report.edge_error_pct:.2f} | {report.area_error_pct:.2f} | "
-                       f"{report.force_ratio_p95:.3f} | {report.force_ratio_max:.1f} | {_millimetres(report.newton_step_max)} | "
-                       f"{'yes' if report.converged else 'no'} | {report.iterations} | "
-                       f"{made - start:.1f} | {took:.1f} |")
+        for label, make in makers:
+            garment = make(body)
+            start = time.perf_counter()
+            draped, report = drape(garment, body)
+            took = time.perf_counter() - start
+            rest_vertices = report.rest_vertices if report.rest_vertices is not None else garment.vertices
+            rest = ClothRest.from_mesh(rest_vertices.double(), garment.faces, garment.material)
+            strain = float(stretching_energy(draped.vertices.double(), rest))
+            reference.setdefault(label, strain)
+            ratio = strain / reference[label] if reference[label] > 0 else math.inf
+            flag = " ✗" if ratio > STRAIN_FACTOR else ""
+            distance = proximity.query(draped.vertices, max_distance=0.5).signed_distance
+            collision = 100.0 * float((distance < 0).float().mean())
+            bar.update(1)
+            yield (f"| {label} | {garment.num_vertices} | {shape.label()} | {report.penetrating_before} | "
+                   f"{collision:.3f} | {report.edge_error_pct:.2f} | {report.area_error_pct:.2f} | {strain:.4g} | "
+                   f"{ratio:.2f}{flag} | {report.force_ratio_p95:.3f} | {'yes' if report.converged else 'no'} | "
+                   f"{report.iterations} | {took:.1f} |")
     bar.close()
 
 
-__all__ = ["CORNER_BODIES", "HEADER", "drape_rows"]
-
-
-def _millimetres(metres: float) -> str:
-    return "–" if math.isnan(metres) else f"{1000 * metres:.3f}"
+__all__ = ["CORNER_BODIES", "HEADER", "STRAIN_FACTOR", "drape_rows"]

@@ -10,7 +10,7 @@ from tqdm import tqdm
 
 from hyperbones.errors import ParameterError
 from hyperbones.io_utils import atomic_path
-from hyperbones.jobs.simulate import run_simulation
+from hyperbones.jobs.simulate import run_simulation, staged_outputs
 from hyperbones.motion.load import capture_rate
 from hyperbones.runtime.config import parse_overrides
 
@@ -48,18 +48,19 @@ def evaluate(methods: list[str], garments: list[str], motions: list[str], bodies
     parse_overrides(runtime)  # a bad setting fails before the first run, not after it
     runs = []
     combos = [(m, g, mo, b) for g in garments for b in bodies for mo in motions for m in methods]
-    for method, garment, motion, body in tqdm(combos, desc="eval", disable=not progress):
-        result = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices, hold=hold,
-                                checkpoint=checkpoint, device=device, source_fps=capture_rate(motion, source_fps),
-                                uv_resolution=uv_resolution, runtime=runtime)
-        runs.append(result.metrics)
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    with atomic_path(out / "report.json") as tmp:
-        tmp.write_text(json.dumps(runs, indent=2) + "\n")
-    with atomic_path(out / "report.md") as tmp:
-        tmp.write_text(_markdown(runs, motions, bodies))
-    return out / "report.md"
+    # Staged from the start: a folder that cannot be written fails before the first run, and
+    # the two reports appear together or not at all.
+    with staged_outputs(out_dir) as staging:
+        for method, garment, motion, body in tqdm(combos, desc="eval", disable=not progress):
+            result = run_simulation(method, garment, motion, body, frames=frames, vertices=vertices, hold=hold,
+                                    checkpoint=checkpoint, device=device, source_fps=capture_rate(motion, source_fps),
+                                    uv_resolution=uv_resolution, runtime=runtime)
+            runs.append(result.metrics)
+        with atomic_path(staging / "report.json") as tmp:
+            tmp.write_text(json.dumps(runs, indent=2) + "\n")
+        with atomic_path(staging / "report.md") as tmp:
+            tmp.write_text(_markdown(runs, motions, bodies))
+    return Path(out_dir) / "report.md"
 
 
 def _markdown(runs: list[dict], motions: list[str], bodies: list[str]) -> str:

@@ -6,9 +6,14 @@ metrics.json. Later methods plug in through METHODS.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import shutil
 import time
+import uuid
 import warnings
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -16,7 +21,7 @@ import torch
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
-from hyperbones.errors import ParameterError
+from hyperbones.errors import OutputError, ParameterError, output_error
 from hyperbones.export import UsdMesh, write_frames_npz, write_obj_sequence, write_pc2, write_usd
 from hyperbones.garment.draped import draped_garment
 from hyperbones.garment.garment import Garment
@@ -103,39 +108,99 @@ def _runtime_record(solver) -> dict | None:
 def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,
                       progress: bool = True) -> dict[str, Path]:
     """Write the output contract into ``out_dir`` (and, with ``obj``, an OBJ per frame into
-    ``out_dir/obj``); returns the written paths by kind."""
+    ``out_dir/obj``); returns the written paths by kind. All or nothing (``staged_outputs``):
+    when one file cannot be written, none of the set replaces an earlier run's."""
     garment = result.garment
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    paths = {
-        "frames": write_frames_npz(out / "frames.npz", garment_vertices=result.garment_vertices,
-                                   garment_faces=garment.faces, body_vertices=result.body_vertices,
-                                   body_faces=result.body_faces, joint_positions=result.joint_positions,
-                                   fps=result.fps),
-        "pc2": write_pc2(out / "garment.pc2", result.garment_vertices.numpy(), fps=result.fps),
-        "usd": write_usd(out / "scene.usd", [
-            UsdMesh("body", result.body_vertices.numpy(), result.body_faces.numpy()),
-            UsdMesh("garment", result.garment_vertices.numpy(), garment.faces.numpy(),
-                    uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy(), display_color=GARMENT_COLOR),
-        ], fps=result.fps),
-    }
-    if preview:
-        from hyperbones.viz.preview import MeshSequence, render_preview
-        from hyperbones.viz.scene import BODY_COLOR
+    with staged_outputs(out) as staging:
+        names = {
+            "frames": write_frames_npz(staging / "frames.npz", garment_vertices=result.garment_vertices,
+                                       garment_faces=garment.faces, body_vertices=result.body_vertices,
+                                       body_faces=result.body_faces, joint_positions=result.joint_positions,
+                                       fps=result.fps).name,
+            "pc2": write_pc2(staging / "garment.pc2", result.garment_vertices.numpy(), fps=result.fps).name,
+            "usd": write_usd(staging / "scene.usd", [
+                UsdMesh("body", result.body_vertices.numpy(), result.body_faces.numpy()),
+                UsdMesh("garment", result.garment_vertices.numpy(), garment.faces.numpy(),
+                        uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy(), display_color=GARMENT_COLOR),
+            ], fps=result.fps).name,
+        }
+        if preview:
+            from hyperbones.viz.preview import MeshSequence, render_preview
+            from hyperbones.viz.scene import BODY_COLOR
 
-        m = result.metrics
-        title = f"{m['method']} | {m['garment']} | {m['motion']} | body {m['body']}"
-        video, sheet = render_preview(
-            [MeshSequence(result.body_vertices.numpy(), result.body_faces.numpy(), BODY_COLOR, "body"),
-             MeshSequence(result.garment_vertices.numpy(), garment.faces.numpy(), GARMENT_COLOR, "garment",
-                          depth_offset=GARMENT_DEPTH_OFFSET)],
-            out / "preview.mp4", result.fps, title=title, progress=progress)
-        paths.update(preview=video, sheet=sheet)
-    if obj:
-        write_obj_sequence(out / "obj", result.garment_vertices.numpy(), garment.faces.numpy(),
-                           uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy())
-        paths["obj"] = out / "obj"
-    with atomic_path(out / "metrics.json") as tmp:
-        tmp.write_text(json.dumps(result.metrics, indent=2) + "\n")
-    paths["metrics"] = out / "metrics.json"
-    return paths
+            m = result.metrics
+            title = f"{m['method']} | {m['garment']} | {m['motion']} | body {m['body']}"
+            video, sheet = render_preview(
+                [MeshSequence(result.body_vertices.numpy(), result.body_faces.numpy(), BODY_COLOR, "body"),
+                 MeshSequence(result.garment_vertices.numpy(), garment.faces.numpy(), GARMENT_COLOR, "garment",
+                              depth_offset=GARMENT_DEPTH_OFFSET)],
+                staging / "preview.mp4", result.fps, title=title, progress=progress)
+            names.update(preview=video.name, sheet=sheet.name)
+        if obj:
+            write_obj_sequence(staging / "obj", result.garment_vertices.numpy(), garment.faces.numpy(),
+                               uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy())
+            names["obj"] = "obj"
+        with atomic_path(staging / "metrics.json") as tmp:
+            tmp.write_text(json.dumps(result.metrics, indent=2) + "\n")
+        names["metrics"] = "metrics.json"
+    return {kind: out / name for kind, name in names.items()}
+
+
+@contextlib.contextmanager
+def staged_outputs(out_dir: str | Path) -> Iterator[Path]:
+    """Yield a hidden folder inside ``out_dir`` (made, parents too, when missing) to write a
+    set of outputs into; when the block ends they all move into ``out_dir``, each replacing
+    its namesake (a folder such as ``obj/`` as a whole), or, when it raises, none does.
+
+    A failure to write (read-only folder, full disk) is an ``OutputError``. Either way nothing
+    of the attempt stays behind: not the staging folder, not an ``out_dir`` made for it, not
+    a file of the set, and an earlier run's outputs are then as they were.
+    """
+    out = Path(out_dir)
+    made = [folder for folder in (out, *out.parents) if not folder.exists()]
+    staging = out / f".staging-{uuid.uuid4().hex[:8]}"
+    try:
+        try:
+            staging.mkdir(parents=True)
+        except OSError as error:
+            raise output_error(out, error) from None
+        try:
+            yield staging
+        except OutputError as error:  # name the output, not its staged copy
+            if staging not in error.path.parents:
+                raise
+            raise OutputError(out / error.path.relative_to(staging), error.problem) from None
+        _move_in(staging, out)
+        made = []
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+        for folder in made:  # deepest first; one that holds anything else stays
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+
+
+def _move_in(staging: Path, out: Path) -> None:
+    """Rename every entry of ``staging`` into ``out`` (hidden ones, writers' leftovers, stay).
+    The entries they replace are moved aside first and back if a rename fails, so ``out``
+    never holds half a set."""
+    aside = staging / ".replaced"
+    names = sorted(entry.name for entry in staging.iterdir() if not entry.name.startswith("."))
+    done: list[str] = []
+    try:
+        aside.mkdir()
+        for name in names:
+            if os.path.lexists(out / name):
+                os.replace(out / name, aside / name)
+            done.append(name)
+            os.replace(staging / name, out / name)
+    except BaseException as error:
+        for name in reversed(done):
+            with contextlib.suppress(OSError):
+                if not os.path.lexists(staging / name):  # the new one went in: take it out again
+                    os.replace(out / name, staging / name)
+                if os.path.lexists(aside / name):
+                    os.replace(aside / name, out / name)
+        if isinstance(error, OSError):
+            raise output_error(out, error) from None
+        raise

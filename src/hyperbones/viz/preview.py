@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
 import numbers
@@ -15,7 +16,7 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
-from hyperbones.errors import ParameterError
+from hyperbones.errors import OutputError, ParameterError, folder_problem, output_error
 from hyperbones.viz.camera import Camera, follow_cameras, project
 from hyperbones.viz.raster import draw_ground, rasterize, shade_mesh, splat_contact
 
@@ -210,6 +211,33 @@ def _temp_beside(path: Path, suffix: str) -> Path:
     return path.with_name(f".{path.stem}.{uuid.uuid4().hex[:12]}{suffix}")
 
 
+def _complete_mp4(path: Path) -> bool:
+    """Whether ``path`` is a whole MP4: its top-level boxes (ISO 14496-12 §4.2: 32-bit size,
+    type; size 1: a 64-bit size follows; size 0: to the end) tile the file exactly and
+    include the movie header ``moov`` and the media data ``mdat``."""
+    end = path.stat().st_size
+    seen = set()
+    with open(path, "rb") as f:
+        at = 0
+        while at < end:
+            f.seek(at)
+            head = f.read(16)
+            if len(head) < 8:
+                return False
+            size, kind = int.from_bytes(head[:4], "big"), head[4:8]
+            if size == 1:
+                if len(head) < 16:
+                    return False
+                size = int.from_bytes(head[8:16], "big")
+            elif size == 0:
+                size = end - at
+            if size < 8:
+                return False
+            seen.add(kind)
+            at += size
+    return at == end and {b"moov", b"mdat"} <= seen
+
+
 def render_preview(
     meshes: list[MeshSequence],
     out_path: str | Path,
@@ -228,7 +256,8 @@ def render_preview(
     pixels (rounded up to even, as yuv420p needs); title, when given, is drawn in
     the top-left of every frame and above the sheet. Outputs are written to temp
     files beside the targets and renamed into place only when complete, so a
-    failure leaves neither partial nor temp files. Returns (mp4 path, sheet path or None).
+    failure leaves neither partial nor temp files; one to write them (read-only
+    folder, full disk) is an ``OutputError``. Returns (mp4 path, sheet path or None).
     """
     out_path = Path(out_path)
     if out_path.suffix.lower() != ".mp4":
@@ -241,21 +270,26 @@ def render_preview(
         raise ParameterError(f"sheet_frames must be at least 1, got {sheet_frames}")
     size = int(size) + int(size) % 2
     n_frames = _validate_meshes(meshes)
-    out_path.parent.mkdir(parents=True, exist_ok=True)
     sheet_path = out_path.with_name(f"{out_path.stem}_sheet.png") if contact_sheet else None
 
     cameras = follow_cameras(*_scene_bounds(meshes), fps)
     sheet_indices = set(np.linspace(0, n_frames - 1, min(sheet_frames, n_frames)).round().astype(int).tolist())
     title_alpha = _title_mask(title, size) if title else None
 
+    made = [folder for folder in (out_path.parent, *out_path.parent.parents) if not folder.exists()]
     temps: list[Path] = []
     writer = None
+    writing = out_path  # the output a failure is about
     try:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
         tmp_video = _temp_beside(out_path, ".tmp.mp4")  # ffmpeg picks the container from the suffix
         temps.append(tmp_video)
+        # Made here, so a folder that refuses it says why; ffmpeg (silenced: its own lines
+        # would break the one-line error) writes over it.
+        tmp_video.open("xb").close()
         writer = imageio.get_writer(
             tmp_video, format="FFMPEG", mode="I", fps=fps, codec="libx264", quality=5,
-            pixelformat="yuv420p", macro_block_size=2, ffmpeg_log_level="error",
+            pixelformat="yuv420p", macro_block_size=2, ffmpeg_log_level="quiet",
             output_params=["-preset", "veryfast", "-movflags", "+faststart"],
         )
         kept: list[tuple[int, np.ndarray]] = []
@@ -268,14 +302,26 @@ def render_preview(
                 kept.append((t, frame))
         writer.close()
         writer = None
+        if not _complete_mp4(tmp_video):  # the writer does not check how ffmpeg ended
+            why = folder_problem(out_path.parent) or "ffmpeg stopped before the video was complete"
+            raise OutputError(out_path, f"cannot write: {why}")
         if sheet_path is not None:
+            writing = sheet_path
             tmp_sheet = _temp_beside(sheet_path, ".tmp.png")
             temps.append(tmp_sheet)
             _contact_sheet(kept, fps, title).save(tmp_sheet, format="PNG")
         # Both files are complete before either is renamed into place.
+        writing = out_path
         os.replace(tmp_video, out_path)
         if sheet_path is not None:
+            writing = sheet_path
             os.replace(tmp_sheet, sheet_path)
+        made = []
+    except Exception as error:
+        failure = output_error(writing, error)
+        if failure is None or failure is error:
+            raise
+        raise failure from error
     finally:
         if writer is not None:
             try:
@@ -283,5 +329,9 @@ def render_preview(
             except Exception:  # already failing; the original error matters more
                 pass
         for tmp in temps:
-            tmp.unlink(missing_ok=True)
+            with contextlib.suppress(OSError):
+                tmp.unlink(missing_ok=True)
+        for folder in made:  # made for this preview, deepest first
+            with contextlib.suppress(OSError):
+                folder.rmdir()
     return out_path, sheet_path
