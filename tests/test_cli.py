@@ -87,8 +87,11 @@ def test_check_drape_prints_a_row_per_drape(capsys):
     default, heavier = ([cell.strip() for cell in row.strip("|").split("|")] for row in rows)
     assert default[0] == heavier[0] == "tshirt" and default[2] == "default" and heavier[2] == "weight=0.7"
     assert float(heavier[4]) == 0.0 and float(heavier[5]) < 3.0  # collision % after, edge error %
-    assert float(default[8]) == 1.0  # strain ÷ the default body's
-    assert abs(float(heavier[8].rstrip(" ✗")) - float(heavier[7]) / float(default[7])) < 0.02 * float(heavier[8].rstrip(" ✗"))
+    assert float(default[8]) == float(default[9]) == float(default[10]) == 1.0  # the default body is the reference
+    area, strain, scaled = float(heavier[8]), float(heavier[9]), float(heavier[10].rstrip(" ✗"))
+    assert area > 1.0  # a heavier body's tshirt is larger
+    assert abs(strain - float(heavier[7]) / float(default[7])) < 0.02 * strain
+    assert abs(scaled - strain / area**2) < 0.02 * scaled
 
 
 def test_malformed_bvh_names_the_file(tmp_path, capsys):

@@ -116,10 +116,16 @@ def test_the_run_records_every_setting(tmp_path):
 
 
 def test_the_shipped_model_carries_its_runtime_config():
+    from hyperbones.errors import InputFileError
     from hyperbones.models.loading import hyperbones_payload
     from hyperbones.runtime.simulator import runtime_config_of
 
-    assert runtime_config_of(hyperbones_payload()) == RuntimeConfig()
+    payload = hyperbones_payload()
+    assert runtime_config_of(payload) == RuntimeConfig()
+    for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
+        with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
+            runtime_config_of({**payload, "runtime_config": bad}, "model.pt")
+        assert "\n" not in str(error.value)
 
 
 def test_overrides_parse_and_bad_ones_are_one_line_errors():
@@ -130,7 +136,9 @@ def test_overrides_parse_and_bad_ones_are_one_line_errors():
     for text, problem in [("follow", "expected key=value"), ("speed=2", "unknown setting 'speed'"),
                           ("follow=fast", "not a number"), ("follow=0", r"\(0, 1\]"),
                           ("untangle=maybe", "true or false"), ("push_rounds=1.5", "whole number"),
-                          ("follow=0.5,follow=0.6", "given twice"), ("follow_near=0.05", "follow_near < follow_far")]:
+                          ("follow=0.5,follow=0.6", "given twice"), ("follow_near=0.05", "follow_near < follow_far"),
+                          ("push_rounds=1e9", r"push_rounds=1000000000 must be in \[1, 64\]"),
+                          ("projection_iterations=5000", r"must be in \[0, 1000\]")]:
         with pytest.raises(ParameterError, match=problem) as error:
             parse_overrides(text)
         assert "\n" not in str(error.value) and str(error.value).startswith("--runtime: ")
@@ -140,4 +148,4 @@ def test_overrides_parse_and_bad_ones_are_one_line_errors():
 
 def test_cli_refuses_a_bad_runtime_before_any_work(capsys):
     assert main(["eval", "--methods", "hyperbones", "--runtime", "contact_rounds=-1", "--out", "/nonexistent/x"]) == 2
-    assert "hyperbones: error: --runtime: runtime contact_rounds=-1 must be >= 0" in capsys.readouterr().err
+    assert "hyperbones: error: --runtime: runtime contact_rounds=-1 must be in [0, 64]" in capsys.readouterr().err

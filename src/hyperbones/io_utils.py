@@ -62,7 +62,8 @@ def load_versioned(path: str | Path, what: str, version: int) -> dict:
         payload = torch.load(path, map_location="cpu", weights_only=True)
     except Exception as error:  # noqa: BLE001 - torch raises many kinds for a bad file
         raise InputFileError(path, f"not a hyperbones {what} ({type(error).__name__})") from None
-    if not isinstance(payload, dict) or payload.get("version") != version:
+    stored = payload.get("version") if isinstance(payload, dict) else None
+    if type(stored) is not int or stored != version:  # a damaged file may hold a tensor there
         raise InputFileError(path, f"not a version-{version} hyperbones {what}")
     return payload
 

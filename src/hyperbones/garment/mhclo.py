@@ -30,11 +30,14 @@ from hyperbones.body.anny_body import Body
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError
 from hyperbones.garment.garment import Garment
-from hyperbones.garment.obj_io import _read_text, clean_triangle_mesh, garment_from_arrays, read_obj
+from hyperbones.garment.obj_io import MAX_COORDINATE, _read_text, clean_triangle_mesh, garment_from_arrays, read_obj
 from hyperbones.geometry.geodesic import mesh_components
 from hyperbones.geometry.warp_setup import init_warp_quietly
 
 HM08_VERTEX_COUNT = 19158
+# A fitted garment vertex this far (m) outside the body's bounding box comes from damaged
+# weights, offsets or scales: MakeHuman clothes lie on the skin.
+MAX_DISTANCE_FROM_BODY = 1.0
 
 # Keys MakeHuman's loader knows; any of them ends a 'verts' / 'weights' / 'delete_verts' section.
 _HEADER_KEYS = frozenset(
@@ -98,6 +101,8 @@ def _number(path: Path, lineno: int, token: str, what: str) -> float:
         raise InputFileError(path, f"line {lineno}: non-numeric {what} {token!r}") from None
     if not np.isfinite(value):
         raise InputFileError(path, f"line {lineno}: {what} is NaN or infinite")
+    if abs(value) > MAX_COORDINATE:
+        raise InputFileError(path, f"line {lineno}: {what} {token!r} is larger than {MAX_COORDINATE:g} in magnitude")
     return value
 
 
@@ -237,7 +242,15 @@ def _fit_and_split(mhclo_path: str | Path, body: Body):
     if len(mesh.positions) != len(binding.ref_vertices):
         raise InputFileError(binding.path, f"has {len(binding.ref_vertices)} vertex bindings but its OBJ "
                                            f"{binding.obj_path.name} has {len(mesh.positions)} vertices")
-    positions = fit_binding(binding, _makehuman_rest(body.shape)) + body.ground_lift.cpu().double().numpy()
+    with np.errstate(all="ignore"):  # overflow from damaged numbers is caught just below
+        positions = fit_binding(binding, _makehuman_rest(body.shape)) + body.ground_lift.cpu().double().numpy()
+    rest = body.rest_vertices.cpu().double().numpy()
+    outside = np.maximum(rest.min(0) - positions, positions - rest.max(0)).max(1)
+    if not (outside <= MAX_DISTANCE_FROM_BODY).all():  # NaN too
+        far = int(np.argmax(np.where(np.isnan(outside), np.inf, outside)))
+        raise InputFileError(binding.path, f"its binding puts garment vertex {far} (binding {far + 1} under "
+                                           f"'verts') {outside[far]:.3g} m outside the body (damaged weights, "
+                                           "offsets or scales?)")
     arrays = clean_triangle_mesh(binding.obj_path, mesh, positions)
     vertices, faces = arrays[0], arrays[1]
     n = len(vertices)

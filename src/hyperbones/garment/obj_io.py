@@ -22,6 +22,8 @@ from hyperbones.io_utils import atomic_path
 
 UNIT_SCALE: dict[str, float] = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001}
 UP_AXES = ("Z", "Y")
+MAX_COORDINATE = 1e6
+"""Larger coordinates are damage, not a garment (1000 km in metres), and overflow float32 arithmetic."""
 
 
 @dataclass
@@ -111,6 +113,9 @@ def read_obj(path: str | Path) -> ObjMesh:
                 raise InputFileError(path, f"line {lineno}: '{key}' needs at least {need} numbers, got {_excerpt(line)}")
             if not all(math.isfinite(x) for x in values[: 3 if key == "v" else 2]):
                 raise InputFileError(path, f"line {lineno}: coordinate is NaN or infinite in {_excerpt(line)}")
+            if not all(abs(x) <= MAX_COORDINATE for x in values[: 3 if key == "v" else 2]):
+                raise InputFileError(path, f"line {lineno}: coordinate larger than {MAX_COORDINATE:g} in magnitude "
+                                           f"in {_excerpt(line)}")
             if key == "v":
                 positions.append(values[:3])  # a 4th (w) or colour values are ignored
                 vertex_lines.append(lineno)

@@ -38,6 +38,12 @@ _POSITIONS = ("Xposition", "Yposition", "Zposition")
 # Python's float() also takes "nan", "1_0" or non-ASCII digits; a BVH number is plainer.
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
 _NONFINITE = ("nan", "inf", "infinity")
+# Larger magnitudes are damage, not data (a BVH unit is about 5.6 cm, angles are in degrees),
+# and would overflow the forward kinematics to inf.
+MAX_VALUE = 1e6
+# Header rates outside this range (frames per second) are damage too; resampling a clip that
+# claims under 1 fps would make an absurdly long motion.
+MIN_FPS, MAX_FPS = 1.0, 10_000.0
 # A frame line: numbers separated by blanks (the lookahead stops "1.5.2" reading as two).
 _FRAME_LINE = re.compile(rf"(?:[ \t]*{_NUMBER.pattern}(?![^ \t]))*[ \t]*")
 
@@ -182,7 +188,11 @@ def _parse_hierarchy(path: Path, lines: list[str]) -> tuple[list[_Joint], int]:
                 raise _at(path, i, f"malformed OFFSET of {what}: expected 3 numbers, found {found}")
             if getattr(owner, slot) is not None:
                 raise _at(path, i, f"second OFFSET for {what}")
-            setattr(owner, slot, np.array([float(t) for t in tokens[1:]]))
+            offset = np.array([float(t) for t in tokens[1:]])
+            if not (np.abs(offset) <= MAX_VALUE).all():  # e.g. '1e999', which overflows to inf
+                found = _shorten(" ".join(tokens[1:]))
+                raise _at(path, i, f"OFFSET of {what} is larger than {MAX_VALUE:g} in magnitude: {found}")
+            setattr(owner, slot, offset)
         elif keyword == "CHANNELS":
             if in_end_site:
                 raise _at(path, i, "CHANNELS inside an End Site")
@@ -270,6 +280,10 @@ def _parse_motion(
     if not 0 < frame_time < float("inf"):
         found = _shorten(time_text)
         raise _at(path, i + 1, f"'Frame Time:' must be a positive number of seconds, found {found}")
+    if not 1 / MAX_FPS <= frame_time <= 1 / MIN_FPS:
+        rate = f"{1 / frame_time:.3g} frames per second"
+        raise _at(path, i + 1, f"'Frame Time:' {_shorten(time_text)} is {rate}, outside the {MIN_FPS:g} "
+                               f"to {MAX_FPS:g} of motion capture")
     start = i + 2
     data = [line.rstrip() for line in lines[start:]]
     while data and not data[-1]:  # trailing blank lines are harmless; blank frames are not
@@ -293,8 +307,8 @@ def _parse_motion(
         if not _FRAME_LINE.fullmatch(line):
             raise _bad_value(path, start + k, k, line)
     values = np.loadtxt(data, dtype=np.float64, comments=None, ndmin=2)
-    if not np.isfinite(values).all():  # e.g. '1e999' overflows to inf
-        k, column = np.argwhere(~np.isfinite(values))[0]
+    if not (np.abs(values) <= MAX_VALUE).all():  # e.g. '1e999' overflows to inf
+        k, column = np.argwhere(~(np.abs(values) <= MAX_VALUE))[0]
         raise _bad_value(path, start + k, k, data[k], column)
     return values, frame_time
 
@@ -303,9 +317,10 @@ def _bad_value(path: Path, i: int, frame: int, line: str, column: int | None = N
     """The error for the first bad token of a frame line (or for the one at `column`)."""
     for c, token in enumerate(line.split()):
         if c == column or (column is None and not _NUMBER.fullmatch(token)):
-            # A column is given for an overflow like '1e999'; else look for 'nan', '-inf', ...
-            nonfinite = column is not None or token.lstrip("+-").lower() in _NONFINITE
-            kind = "non-finite" if nonfinite else "not a number"
+            if column is not None:  # a number too big: '1e999' (inf) or '1e300'
+                kind = f"larger than {MAX_VALUE:g} in magnitude" if np.isfinite(float(token)) else "non-finite"
+            else:  # not a plain number: 'nan', '-inf', 'x', ...
+                kind = "non-finite" if token.lstrip("+-").lower() in _NONFINITE else "not a number"
             return _at(path, i, f"frame {frame} value {c + 1} is {kind}: {_shorten(token)}")
     return _at(path, i, f"frame {frame} has characters other than numbers and blanks")
 
@@ -338,6 +353,9 @@ def read_bvh(path: str | Path) -> BvhClip:
     lines = _read_lines(path)
     joints, motion = _parse_hierarchy(path, lines)
     order = _check_skeleton(path, joints)
+    legs = ("LeftLeg", "LeftFoot", "RightLeg", "RightFoot")  # their OFFSETs are the thighs and shins
+    if not any(joints[order[CMU_JOINT_NAMES.index(name)]].offset.any() for name in legs):
+        raise InputFileError(path, f"the legs have no length: the OFFSETs of {', '.join(legs)} are all zero")
     # Channel columns follow the joints' declaration order in the file, not the canonical one.
     first_column = np.cumsum([0] + [len(j.channels) for j in joints])
     values, frame_time = _parse_motion(path, lines, motion, int(first_column[-1]))

@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 from hyperbones.body.anny_body import Body
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.motion.builtin import BUILTINS, builtin_motion
+from hyperbones.motion.bvh import MAX_FPS, MIN_FPS
 from hyperbones.motion.motion import DEFAULT_FPS, Motion
 from hyperbones.motion.retarget import retarget_bvh
 
@@ -37,8 +39,12 @@ def load_motion(
     """
     if blend_in < 0:
         raise ParameterError(f"--blend-in must be >= 0 frames, got {blend_in}")
-    if fps <= 0:
-        raise ParameterError(f"--fps must be positive, got {fps}")
+    if not 0 < fps <= MAX_FPS:  # also refuses NaN
+        raise ParameterError(f"--fps must be positive and at most {MAX_FPS:g}, got {fps}")
+    if not 0 <= hold < math.inf:
+        raise ParameterError(f"--hold must be >= 0, got {hold}")
+    if source_fps is not None and not MIN_FPS <= source_fps <= MAX_FPS:
+        raise ParameterError(f"--source-fps must lie in [{MIN_FPS:g}, {MAX_FPS:g}] frames per second, got {source_fps}")
     if source in BUILTINS:
         motion = builtin_motion(source, body, speed=speed, duration=duration, hold=0.0, fps=fps)
     elif source.lower().endswith(".bvh") or Path(source).exists():
@@ -46,11 +52,12 @@ def load_motion(
             raise ParameterError("--speed and --duration apply to built-in motions, not to BVH files")
         if Path(source).suffix.lower() != ".bvh":
             raise InputFileError(source, "not a .bvh file (motion files must be CMU BVH)")
-        motion = retarget_bvh(source, body, fps=fps, source_fps=source_fps)
+        try:
+            motion = retarget_bvh(source, body, fps=fps, source_fps=source_fps)
+        except ParameterError as error:  # the options are checked above: the clip itself is unusable
+            raise InputFileError(source, f"cannot be retargeted: {error}") from None
     else:
         raise ParameterError(f"unknown motion {source!r}: give a built-in name ({', '.join(BUILTINS)}) or a .bvh file")
-    if hold < 0:
-        raise ParameterError(f"--hold must be >= 0, got {hold}")
     return motion.blend_in(blend_in, body.rest_root).with_hold(int(round(hold * fps)))
 
 

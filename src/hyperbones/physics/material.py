@@ -45,6 +45,8 @@ class Material:
                 raise ParameterError(f"--material: expected key=value, got {item!r}")
             if key not in aliases:
                 raise ParameterError(f"--material: unknown key {key!r}; known keys: mu, lambda, thickness, density, bending")
+            if aliases[key] in values:  # "mu=1,lame_mu=2" too
+                raise ParameterError(f"--material: {aliases[key]} given twice")
             try:
                 values[aliases[key]] = float(raw)
             except ValueError:

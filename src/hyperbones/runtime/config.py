@@ -17,6 +17,9 @@ from typing import Any, get_type_hints
 from hyperbones.errors import ParameterError
 from hyperbones.physics.energies import COLLISION_EPSILON
 
+MAX_ROUNDS = 64  # push-out and contact rounds: more is no setting but a frame that never ends
+MAX_ITERATIONS = 1000  # projection iterations per round, for the same reason
+
 
 @dataclass(frozen=True)
 class RuntimeConfig:
@@ -92,11 +95,13 @@ class RuntimeConfig:
                      "projection_anchor"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
-        if self.push_rounds < 1:
-            raise ParameterError(f"runtime push_rounds={self.push_rounds!r} must be >= 1")
-        for name in ("contact_rounds", "projection_iterations", "projection_stretch"):
-            if getattr(self, name) < 0:
-                raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be >= 0")
+        if not 1 <= self.push_rounds <= MAX_ROUNDS:
+            raise ParameterError(f"runtime push_rounds={self.push_rounds!r} must be in [1, {MAX_ROUNDS}]")
+        for name, most in (("contact_rounds", MAX_ROUNDS), ("projection_iterations", MAX_ITERATIONS)):
+            if not 0 <= getattr(self, name) <= most:
+                raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be in [0, {most}]")
+        if self.projection_stretch < 0:
+            raise ParameterError(f"runtime projection_stretch={self.projection_stretch!r} must be >= 0")
         if not -1.0 <= self.untangle_cosine <= 1.0:
             raise ParameterError(f"runtime untangle_cosine={self.untangle_cosine!r} must be in [-1, 1]")
         if not 0.0 <= self.projection_compression < 1.0:

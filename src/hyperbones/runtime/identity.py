@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import torch
 
+from hyperbones.errors import InputFileError
 from hyperbones.geometry.uv_raster import UvRaster
 from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.rig.virtual_bones import VirtualBones
@@ -28,6 +29,22 @@ if TYPE_CHECKING:
     from hyperbones.models.hyperbones import HyperBonesModel
 
 IDENTITY_VERSION = 2
+
+# What a saved identity holds: entry -> (float or int tensor, shape in named sizes): V vertices,
+# F faces, U UVs, B bones, C features, R the UV resolution, L×H the FiLM size, N the nonzeros.
+_SAVED = {
+    "rest_vertices": ("float", ("V", 3)), "faces": ("int", ("F", 3)), "rest_joint_positions": ("float", (31, 3)),
+    "weights": ("float", ("V", "B")), "film": ("float", ("L", 2, "H")), "features_uv": ("float", ("C", "R", "R")),
+    "vertex_features": ("float", ("V", "C")), "uvs": ("float", ("U", 2)), "face_uvs": ("int", ("F", 3)),
+    "bones.rest_positions": ("float", ("B", 3)), "bones.garment_vertex": ("int", ("B",)),
+    "bones.joint_weights": ("float", ("B", 31)), "bones.log_weights": ("float", ("V", "B")),
+    "raster.coverage": ("float", ("R", "R")),
+    "raster.raster_indices": ("int", (2, "Nr")), "raster.raster_values": ("float", ("Nr",)),
+    "raster.sampler_indices": ("int", (2, "Ns")), "raster.sampler_values": ("float", ("Ns",)),
+}
+# Index entries -> the sizes each row indexes into ("RR": R²).
+_INDEXES = {"faces": ("V",), "face_uvs": ("U",), "bones.garment_vertex": ("V",),
+            "raster.raster_indices": ("RR", "V"), "raster.sampler_indices": ("V", "RR")}
 
 
 @dataclass
@@ -92,11 +109,61 @@ class Identity:
 
     @classmethod
     def load(cls, path: str | Path, device: torch.device | str = "cpu") -> "Identity":
+        """A saved identity; a damaged or inconsistent file is an ``InputFileError`` naming it."""
         payload = load_versioned(path, "identity cache", IDENTITY_VERSION)
+        _check_saved(Path(path), payload)
         return cls(payload["name"], payload["rest_vertices"], payload["faces"], payload["rest_joint_positions"],
                    VirtualBones(**payload["bones"]), payload["weights"], payload["film"], payload["features_uv"],
                    UvRaster.from_state_dict(payload["raster"]), payload["vertex_features"], payload["uvs"],
                    payload["face_uvs"]).to(device)
+
+
+def _check_saved(path: Path, payload: dict) -> None:
+    """The saved tensors are all there, of their kinds, shapes that fit together, finite, and
+    with their indices in range (what ``Identity.load`` and the per-frame runtime rely on)."""
+    def fail(problem: str):
+        raise InputFileError(path, f"damaged identity cache: {problem}")
+
+    if not isinstance(payload.get("name"), str):
+        fail("no name")
+    for table, keys in (("bones", {"rest_positions", "garment_vertex", "joint_weights", "log_weights"}),
+                        ("raster", {"resolution", "coverage", "raster_indices", "raster_values", "raster_shape",
+                                    "sampler_indices", "sampler_values", "sampler_shape"})):
+        if not isinstance(payload.get(table), dict) or set(payload[table]) != keys:
+            fail(f"its {table} entry is not a table of {', '.join(sorted(keys))}")
+    resolution = payload["raster"]["resolution"]
+    if not isinstance(resolution, int) or isinstance(resolution, bool) or resolution < 1:
+        fail(f"UV resolution {resolution!r} is not a positive whole number")
+    sizes: dict[str, int] = {"R": resolution}
+    tensors: dict[str, torch.Tensor] = {}
+    for name, (kind, shape) in _SAVED.items():
+        table, _, key = name.rpartition(".")
+        value = (payload[table] if table else payload).get(key)
+        if not isinstance(value, torch.Tensor) or value.is_complex() or value.dtype == torch.bool or (
+                value.is_floating_point() != (kind == "float")):
+            fail(f"{name} is not a{'n integer' if kind == 'int' else ' float'} tensor")
+        if value.ndim != len(shape) or any(sizes.setdefault(d, n) != n if isinstance(d, str) else d != n
+                                           for d, n in zip(shape, value.shape)):
+            named = ", ".join(str(d) if isinstance(d, int) else f"{d}={sizes[d]}" if d in sizes else d for d in shape)
+            fail(f"{name} has shape {tuple(value.shape)}, expected ({named})")
+        tensors[name] = value
+    sizes["RR"] = resolution * resolution
+    for name, value in tensors.items():
+        if name == "bones.log_weights":  # -inf: a bone on another piece of cloth
+            bad = torch.isnan(value).any() or (value == float("inf")).any()
+        else:
+            bad = value.is_floating_point() and not torch.isfinite(value).all()
+        if bad:
+            fail(f"{name} holds NaN or infinite values")
+    for name, bounds in _INDEXES.items():
+        rows = tensors[name] if len(bounds) > 1 else tensors[name].reshape(1, -1)
+        for row, bound in zip(rows, bounds):
+            if row.numel() and (int(row.min()) < 0 or int(row.max()) >= sizes[bound]):
+                fail(f"{name} has indices outside [0, {sizes[bound]})")
+    for matrix, shape in (("raster", [sizes["RR"], sizes["V"]]), ("sampler", [sizes["V"], sizes["RR"]])):
+        stored = payload["raster"][f"{matrix}_shape"]
+        if not (isinstance(stored, list) and all(type(n) is int for n in stored) and stored == shape):
+            fail(f"raster.{matrix}_shape is {stored!r}, expected {shape}")
 
 
 @dataclass

@@ -18,14 +18,15 @@ them and its edges are pulled towards their rest lengths (``runtime.push_out``,
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import torch
 
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
-from hyperbones.errors import ParameterError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.models.loading import hyperbones_payload, model_of
+from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.config import RuntimeConfig
@@ -42,11 +43,19 @@ def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Ten
     return points @ transform[..., :3, :3].transpose(-1, -2) + transform[..., None, :3, 3]
 
 
-def runtime_config_of(payload: dict) -> RuntimeConfig:
-    """The runtime settings a HyperBones checkpoint was exported with (the defaults for one
-    that stores none: training checkpoints and older exports)."""
+def runtime_config_of(payload: dict, source: str | Path = "checkpoint") -> RuntimeConfig:
+    """The runtime settings a HyperBones checkpoint (from ``source``) was exported with (the
+    defaults for one that stores none: training checkpoints and older exports); a stored one
+    that is not a valid ``RuntimeConfig`` is an ``InputFileError`` naming ``source``."""
     stored = payload.get("runtime_config")
-    return RuntimeConfig() if stored is None else RuntimeConfig.from_dict(dict(stored), "checkpoint runtime_config")
+    if stored is None:
+        return RuntimeConfig()
+    if not isinstance(stored, dict):
+        raise InputFileError(source, f"its runtime_config is a {type(stored).__name__}, not a table of settings")
+    try:
+        return RuntimeConfig.from_dict(dict(stored), "runtime_config")
+    except (ParameterError, TypeError) as error:
+        raise InputFileError(source, f"bad runtime_config ({error})") from None
 
 
 @dataclass
@@ -180,7 +189,7 @@ class Simulator:
                 raise ParameterError(f"{len(rests)} rest shapes for {len(characters)} characters")
             identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution, rest_vertices=rest)
                           for (garment, body), rest in zip(characters, rests)]
-        config = replace(config or runtime_config_of(payload), **(overrides or {}))
+        config = replace(config or runtime_config_of(payload, checkpoint or SHIPPED_HYPERBONES), **(overrides or {}))
         return cls(model.runtime, identities, device, body_faces=characters[0][1].faces, config=config)
 
     def _carried(self, character: int, motion: torch.Tensor,

@@ -12,6 +12,7 @@ what their runs found: ``docs/experiments/``.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass, field, replace
@@ -214,9 +215,13 @@ def load_config(path: str | Path) -> TeacherTrainingConfig:
     if not path.exists():
         raise InputFileError(path, "config file not found")
     try:
-        values = tomllib.loads(path.read_text())
+        values = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as error:
         raise InputFileError(path, f"not valid TOML ({error})") from None
+    except RecursionError:
+        raise InputFileError(path, "not valid TOML (nested too deeply)") from None
+    except OSError as error:
+        raise InputFileError(path, f"cannot be read ({error.strerror or error})") from None
     kind = HyperBonesTrainingConfig if "joint" in values else TeacherTrainingConfig
     return kind.from_dict(values, str(path))
 
@@ -278,6 +283,11 @@ class _WrongType(ValueError):
     """A value that does not fit its field; the caller says which file or option it came from."""
 
 
+_SIGNED = frozenset({"train.seed"})
+"""The only numbers of a training config that may be negative; sizes, counts, rates, weights and
+lengths may not."""
+
+
 def _build(kind, values: Any, section: str, source: str):
     if not isinstance(values, dict):
         raise InputFileError(source, f"[{section}] must be a table")
@@ -296,17 +306,23 @@ def _coerce(kind, value: Any, where: str):
     if origin is tuple:
         if not isinstance(value, (list, tuple)):
             raise _WrongType(f"{where} must be a list, got {value!r}")
-        return tuple(_coerce(get_args(kind)[0], item, where) for item in value)
+        items = get_args(kind)
+        if Ellipsis not in items and len(value) != len(items):  # e.g. tuple[float, float]: exactly two
+            raise _WrongType(f"{where} must be a list of {len(items)}, got {value!r}")
+        return tuple(_coerce(items[0], item, where) for item in value)
     if origin is dict:
         if not isinstance(value, dict):
             raise _WrongType(f"{where} must be a table, got {value!r}")
         return {str(k): _coerce(get_args(kind)[1], v, where) for k, v in value.items()}
     if kind is bool and isinstance(value, bool):
         return value
-    if kind is float and isinstance(value, (int, float)) and not isinstance(value, bool):
-        return float(value)
-    if kind is int and isinstance(value, int) and not isinstance(value, bool):
-        return value
+    number = isinstance(value, (int, float)) and not isinstance(value, bool)
+    if (kind is float and number) or (kind is int and number and isinstance(value, int)):
+        if not math.isfinite(value):  # TOML has nan and inf
+            raise _WrongType(f"{where} must be a finite number, got {value!r}")
+        if value < 0 and where not in _SIGNED:
+            raise _WrongType(f"{where} must be >= 0, got {value!r}")
+        return float(value) if kind is float else value
     if kind is str and isinstance(value, str):
         return value
     raise _WrongType(f"{where} must be {kind.__name__}, got {value!r}")
