@@ -8,7 +8,9 @@ import argparse
 import sys
 import warnings
 
-from hyperbones.errors import HyperbonesError, is_output_fault
+from hyperbones.errors import HyperbonesError
+
+from hyperbones.io_utils import is_output_fault
 
 
 def build_parser() -> argparse.ArgumentParser:

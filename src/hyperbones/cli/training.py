@@ -50,7 +50,7 @@ def add_train(sub) -> None:
 
 
 def run_export(args) -> int:
-    from hyperbones.jobs.simulate import staged_outputs
+    from hyperbones.io_utils import staged_outputs
     from hyperbones.training.checkpoint import export_weights
 
     out = Path(args.out)

@@ -10,7 +10,9 @@ from pathlib import Path
 
 import numpy as np
 
-from hyperbones.errors import ParameterError, output_error
+from hyperbones.errors import ParameterError
+
+from hyperbones.io_utils import output_error
 from hyperbones.export._checks import check_up, faces_array, frames_array, to_up, uv_arrays
 
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]*$")

@@ -9,8 +9,8 @@ from pathlib import Path
 from tqdm import tqdm
 
 from hyperbones.errors import ParameterError
-from hyperbones.io_utils import atomic_path
-from hyperbones.jobs.simulate import run_simulation, staged_outputs
+from hyperbones.io_utils import atomic_path, staged_outputs
+from hyperbones.jobs.simulate import run_simulation
 from hyperbones.motion.load import capture_rate
 from hyperbones.runtime.config import parse_overrides
 

@@ -6,14 +6,9 @@ metrics.json. Later methods plug in through METHODS.
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
-import shutil
 import time
-import uuid
 import warnings
-from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -21,11 +16,11 @@ import torch
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
-from hyperbones.errors import OutputError, ParameterError, output_error
+from hyperbones.errors import ParameterError
 from hyperbones.export import UsdMesh, write_frames_npz, write_obj_sequence, write_pc2, write_usd
 from hyperbones.garment.draped import draped_garment
 from hyperbones.garment.garment import Garment
-from hyperbones.io_utils import atomic_path
+from hyperbones.io_utils import atomic_path, staged_outputs
 from hyperbones.jobs.methods import METHODS
 from hyperbones.motion.load import DEFAULT_BLEND_IN, load_motion
 from hyperbones.physics.cloth import ClothRest
@@ -147,60 +142,3 @@ def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bo
     return {kind: out / name for kind, name in names.items()}
 
 
-@contextlib.contextmanager
-def staged_outputs(out_dir: str | Path) -> Iterator[Path]:
-    """Yield a hidden folder inside ``out_dir`` (made, parents too, when missing) to write a
-    set of outputs into; when the block ends they all move into ``out_dir``, each replacing
-    its namesake (a folder such as ``obj/`` as a whole), or, when it raises, none does.
-
-    A failure to write (read-only folder, full disk) is an ``OutputError``. Either way nothing
-    of the attempt stays behind: not the staging folder, not an ``out_dir`` made for it, not
-    a file of the set, and an earlier run's outputs are then as they were.
-    """
-    out = Path(out_dir)
-    made = [folder for folder in (out, *out.parents) if not folder.exists()]
-    staging = out / f".staging-{uuid.uuid4().hex[:8]}"
-    try:
-        try:
-            staging.mkdir(parents=True)
-        except OSError as error:
-            raise output_error(out, error) from None
-        try:
-            yield staging
-        except OutputError as error:  # name the output, not its staged copy
-            if staging not in error.path.parents:
-                raise
-            raise OutputError(out / error.path.relative_to(staging), error.problem) from None
-        _move_in(staging, out)
-        made = []
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-        for folder in made:  # deepest first; one that holds anything else stays
-            with contextlib.suppress(OSError):
-                folder.rmdir()
-
-
-def _move_in(staging: Path, out: Path) -> None:
-    """Rename every entry of ``staging`` into ``out`` (hidden ones, writers' leftovers, stay).
-    The entries they replace are moved aside first and back if a rename fails, so ``out``
-    never holds half a set."""
-    aside = staging / ".replaced"
-    names = sorted(entry.name for entry in staging.iterdir() if not entry.name.startswith("."))
-    done: list[str] = []
-    try:
-        aside.mkdir()
-        for name in names:
-            if os.path.lexists(out / name):
-                os.replace(out / name, aside / name)
-            done.append(name)
-            os.replace(staging / name, out / name)
-    except BaseException as error:
-        for name in reversed(done):
-            with contextlib.suppress(OSError):
-                if not os.path.lexists(staging / name):  # the new one went in: take it out again
-                    os.replace(out / name, staging / name)
-                if os.path.lexists(aside / name):
-                    os.replace(aside / name, out / name)
-        if isinstance(error, OSError):
-            raise output_error(out, error) from None
-        raise

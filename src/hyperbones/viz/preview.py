@@ -16,7 +16,9 @@ import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 from tqdm import tqdm
 
-from hyperbones.errors import OutputError, ParameterError, folder_problem, output_error
+from hyperbones.errors import OutputError, ParameterError
+
+from hyperbones.io_utils import folder_problem, output_error
 from hyperbones.viz.camera import Camera, follow_cameras, project
 from hyperbones.viz.raster import draw_ground, rasterize, shade_mesh, splat_contact
 
