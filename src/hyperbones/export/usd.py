@@ -8,10 +8,9 @@ from pathlib import Path
 import numpy as np
 
 from hyperbones.errors import OutputError, ParameterError
-
-from hyperbones.io_utils import atomic_path, stated_reason
 from hyperbones.export._checks import (check_positive, check_up, faces_array, frames_array, to_up,
                                        uv_arrays)
+from hyperbones.io_utils import atomic_path, stated_reason
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
