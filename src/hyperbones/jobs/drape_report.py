@@ -4,9 +4,10 @@ Each garment is draped on the default body first: its strain there is the refere
 the other bodies' strain is held against (a garment fitted to a body should rest on it about
 as relaxed as on the default one; a much larger strain means its fit, drape and rest shape
 disagree on that body, and every method downstream pulls against it). A garment fitted to a
-larger body is larger, and under its own weight its strain energy grows as the square of its
-area (strain with its length, energy with strain squared times area), so the flag compares the
-strain to the default body's scaled by that square.
+larger body is larger, and under its own weight its strain energy grows about as the square of
+its area (strain with its length, energy with strain squared times area): a strain over twice
+the default body's is flagged only when it is also over twice that once divided by the area
+ratio squared.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from hyperbones.physics.energies import stretching_energy
 CORNER_BODIES = tuple(f"gender={gender},weight={weight},height={height}"
                       for gender, weight, height in itertools.product((0.1, 0.9), repeat=3))
 """The eight corners of (gender, weight, height) in {0.1, 0.9}, the rest of the shape at 0.5."""
-STRAIN_FACTOR = 2.0  # flagged: a strain over this many times the default body's, scaled by the area ratio squared
+STRAIN_FACTOR = 2.0  # flagged: a strain over this many times the default body's, with and without the size scaling
 
 HEADER = ("| garment | vertices | body | penetrating before | collision % after | edge error % | area error % | "
           "strain J | area ÷ default's | strain ÷ default's | ÷ area ratio² | force p95 | at rest | iterations | "
@@ -53,8 +54,8 @@ def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path
     default body's first: collision % (d < 0), edge/area error % and the strain energy (J)
     of the drape against its rest shape, that strain over the default body's, and how close
     to rest the drape got (95th percentile over free vertices of |∇E_i| / (m_i g), whether
-    it met its tolerance, Newton iterations). A strain ratio over ``STRAIN_FACTOR`` times the
-    rest area's ratio squared is marked ✗."""
+    it met its tolerance, Newton iterations). A strain ratio over ``STRAIN_FACTOR``, both as it
+    is and divided by the rest area's ratio squared, is marked ✗."""
     shapes = [BodyShape()] + [shape for shape in map(BodyShape.parse, bodies) if shape != BodyShape()]
     makers = _garments(tuple(templates), resolutions, mhclo_files, body_for(shapes[0]))
     reference: dict[str, tuple[float, float]] = {}
@@ -75,7 +76,7 @@ def drape_rows(resolutions: list[int], bodies: list[str], mhclo_files: list[Path
             strain_0, area_0 = reference.setdefault(label, (strain, area))
             ratio = strain / strain_0 if strain_0 > 0 else math.inf
             scaled = ratio / (area / area_0) ** 2
-            flag = " ✗" if scaled > STRAIN_FACTOR else ""
+            flag = " ✗" if min(ratio, scaled) > STRAIN_FACTOR else ""
             distance = proximity.query(draped.vertices, max_distance=0.5).signed_distance
             collision = 100.0 * float((distance < 0).float().mean())
             bar.update(1)
