@@ -79,7 +79,7 @@ def test_errors_are_one_line(tmp_path, capsys, monkeypatch, argv, phrase):
 
 
 def test_check_drape_prints_a_row_per_drape(capsys):
-    code, out, _ = _run(capsys, "check", "drape", "--templates", "tshirt", "--resolutions", "1500", "--bodies",
+    code, out, _ = _run(capsys, "check", "drape", "--templates", "tshirt", "--resolutions", "1000", "--bodies",
                         "weight=0.7", "--quiet")
     header, rule, *rows = out.strip().splitlines()
     assert code == 0 and header.startswith("| garment | vertices | body |") and rule.startswith("|---|")

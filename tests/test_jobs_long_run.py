@@ -37,8 +37,8 @@ def test_looped_walk_repeats_one_stretch_smoothly(body):
 
 
 def test_check_long_prints_the_table(capsys):
-    code = main(["check", "long", "--methods", "lbs,hyperbones", "--frames", "60", "--vertices", "1000",
-                 "--device", "cpu", "--quiet"])
+    code = main(["check", "long", "--methods", "lbs,hyperbones", "--frames", "60", "--garment", "tshirt",
+                 "--vertices", "1000", "--device", "cpu", "--quiet"])
     out = capsys.readouterr().out
     assert code == 0
     header, rule, *rest = out.strip().splitlines()

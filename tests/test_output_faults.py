@@ -252,10 +252,10 @@ def test_atomic_path_lets_other_errors_through(tmp_path):
 
 @pytest.fixture(scope="module")
 def simulated():
-    """(a 4-frame lbs run of a ~1000-vertex dress, the same cut to 3 frames: an earlier run)."""
+    """(a 4-frame lbs run of a ~1000-vertex tshirt, the same cut to 3 frames: an earlier run)."""
     from hyperbones.jobs.simulate import run_simulation
 
-    result = run_simulation("lbs", "dress", "walk", None, frames=4, vertices=1000)
+    result = run_simulation("lbs", "tshirt", "walk", None, frames=4, vertices=1000)
     cut = {"garment_vertices": result.garment_vertices[:3], "body_vertices": result.body_vertices[:3],
            "joint_positions": result.joint_positions[:3], "metrics": {**result.metrics, "frames": 3}}
     return result, dataclasses.replace(result, **cut)
@@ -264,7 +264,8 @@ def simulated():
 def simulate(capfd, monkeypatch, result, out: Path, *flags) -> tuple[int, str, str]:
     """``hyperbones simulate`` writing ``result`` (the simulation itself is not redone)."""
     monkeypatch.setattr("hyperbones.jobs.simulate.run_simulation", lambda *args, **kwargs: result)
-    return run(capfd, "simulate", "--method", "lbs", "--garment", "dress", "--out", out, "--quiet", *flags)
+    return run(capfd, "simulate", "--method", "lbs", "--garment", "tshirt", "--vertices", "1000", "--out", out,
+               "--quiet", *flags)
 
 
 def _staged(source: Path) -> bool:
@@ -368,7 +369,7 @@ def _eval_stub(monkeypatch, result) -> list:
     return calls
 
 
-EVAL = ("eval", "--methods", "lbs", "--garments", "dress", "--motions", "walk", "--quiet")
+EVAL = ("eval", "--methods", "lbs", "--garments", "tshirt", "--vertices", "1000", "--motions", "walk", "--quiet")
 
 
 def test_eval_read_only_fails_before_the_first_run(simulated, read_only, monkeypatch, capfd):
@@ -438,7 +439,7 @@ def test_garment_make(fault, request, capfd):
 def test_identity(fault, simulated, request, capfd):
     """torch.save: a full disk is a RuntimeError of torch's writer, named by the disk."""
     folder, why = faulty_folder(fault, request, "identity", torch_save_fails)
-    code, _, err = run(capfd, "identity", "--garment", "dress", "--vertices", "1000", "--untrained",
+    code, _, err = run(capfd, "identity", "--garment", "tshirt", "--vertices", "1000", "--untrained",
                        "--uv-resolution", "32", "--out", folder / "dress.pt")
     assert_one_line(code, err, f"{folder / 'dress.pt'}: cannot write: {why}")
     assert snapshot(folder) == {}

@@ -42,8 +42,8 @@ def test_every_field_has_a_changed_value_here():
 
 @pytest.fixture(scope="module")
 def walk(body):
-    """The shipped model's Module A on the shipped dress (fitted, 1,000 vertices) and 20 frames
-    of the built-in walk, posed."""
+    """The shipped model's Module A on the dress (fitted, 1,000 vertices) and 12 frames of the
+    built-in walk, posed."""
     from hyperbones.garment.templates import make_template
     from hyperbones.motion.load import load_motion
     from hyperbones.runtime.identity import encode_identity
@@ -53,7 +53,7 @@ def walk(body):
     garment = make_template("dress", body, 1000)
     with torch.no_grad():
         identity = encode_identity(model, garment, body)
-    motion = load_motion("walk", body).slice(0, 20)
+    motion = load_motion("walk", body).slice(0, 12)
     posed = body.pose(motion.joint_rotations, motion.root_translation)
     return model.runtime, identity, body, posed
 
