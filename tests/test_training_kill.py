@@ -17,26 +17,13 @@ import torch
 
 from hyperbones.models.loading import load_checkpoint
 from hyperbones.training.checkpoint import load_optimizer_state, optimizer_path, save_training_state
+from test_training_trainer import TINY_TOML
 
 STEPS, EVERY = 48, 4
 
-CONFIG = f"""
-[model]
-latent = 16
-blocks = 2
-[data]
-templates = ["tshirt"]
-resolutions = [1000]
-train_clips = []
-builtins = ["walk"]
-hold_seconds = 0.5
-[train]
-steps = {STEPS}
-checkpoint_every = {EVERY}
-log_every = 1
-rollout_max = 2
-rollout_ramp_steps = 2
-"""
+# The trainer tests' tiny teacher config, run longer (``train --set``).
+OVERRIDES = [f"train.steps={STEPS}", f"train.checkpoint_every={EVERY}", "train.rollout_max=2",
+             "train.rollout_ramp_steps=2"]
 
 # `hyperbones train` as the CLI runs it, noting in a journal (one unbuffered append per line, so
 # a SIGKILL loses none) each step it reaches and each save it begins and ends. Its checkpoint
@@ -117,11 +104,12 @@ def test_train_killed_at_random_moments_resumes(tmp_path, body):
     """Four SIGKILLs: two at random steps, one while the optimiser state is being written and
     one while the checkpoint is (the optimiser state of the new step already written)."""
     config = tmp_path / "tiny.toml"
-    config.write_text(CONFIG)
+    config.write_text(TINY_TOML)
     script = tmp_path / "journaled_train.py"
     script.write_text(JOURNALED_TRAIN)
     run, journal = tmp_path / "run", tmp_path / "journal.txt"
     command = [sys.executable, str(script), str(journal), "train", "--config", str(config), "--out", str(run),
+               *(f"--set={override}" for override in OVERRIDES),
                "--quiet", "--resume"]  # --resume with no checkpoint yet starts afresh
     env = dict(os.environ, OMP_NUM_THREADS="1")
     rng = random.Random(7)

@@ -65,7 +65,8 @@ def add_drape(checks) -> None:
                               description="Drapes every template (at each --resolutions) and every piece of the "
                                           "given MakeHuman .mhclo files on the default body, then on each body, and "
                                           "prints collision, edge/area error and strain against the rest shape; a "
-                                          "strain over twice the default body's is marked ✗.")
+                                          "strain over twice the default body's, also once divided by the rest "
+                                          "area's ratio squared, is marked ✗.")
     drape.add_argument("mhclo", nargs="*", help="MakeHuman .mhclo garments to include (every piece)")
     drape.add_argument("--resolutions", default="1500",
                        help="template vertex counts (comma list; empty: no templates; default: 1500)")

@@ -242,18 +242,18 @@ class Simulator:
         garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
         bodies = body_vertices.to(self.device) if body_vertices is not None else None
         motion = None
-        follow = self.config
-        if follow.follows and self.last_output is not None:
+        settings = self.config
+        if settings.follows and self.last_output is not None:
             motion = torch.linalg.inv(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
-            carrier = motion if self.last_motion is None else motion + follow.carry_lag * (self.last_motion - motion)
+            carrier = motion if self.last_motion is None else motion + settings.carry_lag * (self.last_motion - motion)
             carried, on_skin = zip(*[self._carried(i, carrier[i], bodies[i] if bodies is not None else None)
                                      for i in range(count)])
-            gap = follow.follow - follow.loose_follow
-            shares = [follow.follow if skin is None else follow.loose_follow + gap * skin[:, None]
+            gap = settings.follow - settings.loose_follow
+            shares = [settings.follow if skin is None else settings.loose_follow + gap * skin[:, None]
                       for skin in on_skin]  # N floats (no body) or (V_i,1)
             garments = [start + share * (target - start) for start, target, share in zip(carried, garments, shares)]
         if bodies is not None:
             garments = self.contact(garments, bodies)
-        if follow.follows:
+        if settings.follows:
             self.last_output, self.last_to_local, self.last_motion = garments, to_local, motion
         return garments
