@@ -1,14 +1,9 @@
 import pytest
 import torch
 
-from hyperbones.geometry.proximity import (
-    BodyProximity,
-    closest_points_on_faces,
-    face_planes,
-    is_closed_surface,
-    signed_distance,
-    surface_points,
-)
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.surface import (closest_points_on_faces, face_planes, is_closed_surface, signed_distance,
+                                         surface_points)
 from hyperbones.physics.energies import collision_energy
 
 F64 = torch.float64
@@ -166,7 +161,7 @@ def test_closest_points_on_faces_match_warp_and_a_dense_sampling(sphere, sphere_
 
 
 def test_push_outside_moves_only_close_movable_points(sphere_proximity):
-    from hyperbones.geometry.proximity import push_outside
+    from hyperbones.geometry.surface import push_outside
 
     proximity = sphere_proximity
     points = torch.tensor([[0.0, 0.0, 0.5], [0.0, 0.0, 1.0005], [0.0, 0.0, 1.5], [0.0, 0.5, 0.0]])

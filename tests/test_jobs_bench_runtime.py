@@ -32,6 +32,7 @@ def test_bench_runtime_command(tmp_path, body, capsys):
     record, later = json.loads(out.read_text())
     assert record["method"] == "hyperbones@16" and record["batch"] == 2 and record["ms_per_frame"] > 0
     assert (record["from_frame"], later["from_frame"]) == (1, late) and later["ms_per_frame"] > 0
+    assert all(r["p95_ms"] >= r["ms_per_frame"] and r["stages"] == {} for r in (record, later))
     assert record["vertices"] == identity.num_vertices and record["garment"] == "dress"
     assert "timing only" in capsys.readouterr().out
 
@@ -63,8 +64,8 @@ def test_timed_blocks_time_the_frames_asked_for():
 
     seen = []
     blocks = timed_blocks(seen.append, torch.device("cpu"), warmup=2, frames=3, late=10)
-    assert seen == list(range(13)) and [first for first, _ in blocks] == [2, 10]
-    assert all(ms >= 0 for _, ms in blocks)
+    assert seen == list(range(13)) and [block.first for block in blocks] == [2, 10]
+    assert all(0 <= block.median <= block.p95 for block in blocks)
     with pytest.raises(ParameterError, match="--late 3 must come after the first timed block"):
         timed_blocks(seen.append, torch.device("cpu"), warmup=2, frames=3, late=3)
 

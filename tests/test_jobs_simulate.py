@@ -16,7 +16,8 @@ from hyperbones.rig.garment_skinning import LbsMethod
 from hyperbones.jobs.simulate import run_simulation
 
 METRIC_KEYS = {"edge_error_pct", "area_error_pct", "collision_pct", "collision_1mm_pct", "strain", "bending",
-               "inertia", "gravity", "frames", "ms_per_frame", "method", "garment", "motion", "body"}
+               "inertia", "gravity", "frames", "ms_per_frame", "ms_median", "ms_p95", "method", "garment", "motion",
+               "body"}
 
 
 def test_lbs_identity_pose_gives_the_drape(body):
@@ -39,6 +40,7 @@ def test_simulate_every_template(garment, motion):
     result = run_simulation("lbs", garment, source, None, frames=25, vertices=1000)
     assert result.garment_vertices.shape == (25, result.garment.num_vertices, 3)
     assert METRIC_KEYS <= set(result.metrics)
+    assert 0 < result.metrics["ms_median"] <= result.metrics["ms_p95"]  # each frame timed on its own
     assert torch.isfinite(result.garment_vertices).all()
     assert 0 <= result.metrics["collision_pct"] < 20 and result.metrics["edge_error_pct"] < 40
 

@@ -399,7 +399,7 @@ def test_bench_json(fault, request, monkeypatch, capfd):
     from hyperbones.jobs.timing import BenchRecord
 
     monkeypatch.setattr("hyperbones.jobs.bench.bench",
-                        lambda *args, **kwargs: [BenchRecord("lbs", "dress", 1000, "cpu", 1, 0.1)])
+                        lambda *args, **kwargs: [BenchRecord("lbs", "dress", 1000, "cpu", 1, 0.1, 0.2)])
     folder, why = faulty_folder(fault, request, "bench", _fills(".json"))
     code, out, err = run(capfd, "bench", "--methods", "lbs", "--garments", "dress", "--quiet",
                          "--json", folder / "bench.json")

@@ -13,6 +13,8 @@ from hyperbones.runtime.config import RuntimeConfig, parse_overrides
 
 # A non-default value for every field, each one chosen so that it changes the walk below.
 CHANGED = {
+    "uv_resolution": 16,
+    "bfloat16": True,
     "follow": 0.8,
     "loose_follow": 0.7,
     "carry_lag": 0.0,
@@ -22,12 +24,14 @@ CHANGED = {
     "contact_margin": 0.006,
     "query_distance": 0.02,
     "round_query_distance": 0.015,
+    "round_search_gap": 0.008,
     "push_rounds": 1,
     "plane_reach": 0.01,
     "contact_rounds": 1,
     "untangle": False,
     "untangle_cosine": -0.5,
     "projection_iterations": 2,
+    "projection_chebyshev": 0.8,
     "projection_anchor": 0.2,
     "projection_stretch": 0.03,
     "projection_compression": 0.03,
@@ -121,7 +125,7 @@ def test_the_shipped_model_carries_its_runtime_config():
     from hyperbones.runtime.simulator import runtime_config_of
 
     payload = hyperbones_payload()
-    assert runtime_config_of(payload) == RuntimeConfig()
+    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=32)  # docs/experiments/*-realtime-runtime.md
     for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
         with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
             runtime_config_of({**payload, "runtime_config": bad}, "model.pt")

@@ -43,3 +43,25 @@ def test_bad_settings_are_refused():
         EdgeProjection(sheet, faces, iterations=0)
     with pytest.raises(ParameterError, match="anchor"):
         EdgeProjection(sheet, faces, anchor=0.0)
+
+
+def test_the_dense_solver_gives_the_sparse_solvers_answer():
+    """The GPU's solver (dense inverse, all torch) and the CPU's (sparse LU) agree, with contact
+    planes: the CUDA path is this code on another device."""
+    from hyperbones.physics.contact_planes import ContactPlanes
+
+    sheet, faces = _grid(14, 12, 0.02)
+    generator = torch.Generator().manual_seed(0)
+    moved = sheet * torch.tensor([1.15, 0.95, 1.0]) + 0.004 * torch.randn(sheet.shape, generator=generator)
+    vertex = torch.arange(0, sheet.shape[0], 3)
+    planes = ContactPlanes(vertex, moved[vertex] + torch.tensor([0.0, 0.0, 0.002]),
+                           torch.tensor([0.0, 0.0, 1.0]).expand(len(vertex), 3).contiguous())
+    sparse = EdgeProjection(sheet, faces, solver="sparse").project(moved, planes)
+    dense_projection = EdgeProjection(sheet, faces, solver="dense")
+    assert dense_projection.solver == "dense" and EdgeProjection(sheet, faces).solver == "sparse"  # auto on a CPU
+    dense = dense_projection.project(moved, planes)
+    assert float((sparse - moved).abs().max()) > 1e-3  # it did move them
+    assert float((dense - sparse).abs().max()) < 1e-5
+    assert float(((dense[vertex] - planes.point) * planes.normal).sum(1).min()) > -1e-6  # planes held
+    with pytest.raises(ParameterError, match="solver"):
+        EdgeProjection(sheet, faces, solver="cholmod")

@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from hyperbones.geometry.proximity import Nearest
+from hyperbones.geometry.surface import Nearest
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material

@@ -65,13 +65,30 @@ def forward_kinematics(
 
     Returns:
         (T,31,3) joint heads: head_c = head_p + R_p (rest_c - rest_p).
+
+    The rotations are world ones, so a head is the root plus its ancestors' rotated
+    bone offsets: two batched products, no loop over the joints.
     """
-    heads = [root_translation]
-    for child in range(1, NUM_JOINTS):
-        parent = JOINT_PARENTS[child]
-        offset = rest_joint_positions[..., child, :] - rest_joint_positions[..., parent, :]
-        heads.append(heads[parent] + (joint_rotations[:, parent] @ offset[..., None]).squeeze(-1))
-    return torch.stack(heads, dim=1)
+    parents = _PARENTS.to(joint_rotations.device)
+    offsets = rest_joint_positions - rest_joint_positions[..., parents, :]  # (...,31,3), root's is 0
+    rotated = (joint_rotations[:, parents] @ offsets[..., None]).squeeze(-1)  # (T,31,3)
+    ancestry = _ANCESTRY.to(device=joint_rotations.device, dtype=rotated.dtype)
+    return root_translation[:, None] + ancestry @ rotated
+
+
+def _ancestry() -> torch.Tensor:
+    """(31,31) 1 where column joint k is the row joint itself or one of its ancestors below the root."""
+    ancestry = torch.zeros(NUM_JOINTS, NUM_JOINTS)
+    for joint in range(1, NUM_JOINTS):  # once, at import
+        ancestor = joint
+        while ancestor > 0:
+            ancestry[joint, ancestor] = 1.0
+            ancestor = JOINT_PARENTS[ancestor]
+    return ancestry
+
+
+_PARENTS = torch.tensor([0] + list(JOINT_PARENTS[1:]))  # the root is its own parent (offset 0)
+_ANCESTRY = _ancestry()
 
 
 def skinning_transforms(

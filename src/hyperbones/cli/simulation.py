@@ -150,8 +150,9 @@ def add_eval(sub) -> None:
     evaluation.set_defaults(func=run_eval)
 
 
-def _report_records(records, json_path: str | None, notes: list[str]) -> None:
-    """Print bench records as a table, then ``notes``; write them to ``json_path`` when given."""
+def _report_records(records, json_path: str | None, notes: list[str], after: list[str] | None = None) -> None:
+    """Print bench records as a table, then ``notes``, then each block of ``after`` (a blank
+    line before each); write the records to ``json_path`` when given."""
     import json
 
     from hyperbones.io_utils import atomic_path
@@ -160,6 +161,9 @@ def _report_records(records, json_path: str | None, notes: list[str]) -> None:
     print(bench_table(records))
     for line in notes:
         print(line)
+    for block in after or []:
+        print()
+        print(block)
     if json_path:
         with atomic_path(json_path) as tmp:
             tmp.write_text(json.dumps(records_as_dicts(records), indent=2) + "\n")
@@ -177,26 +181,47 @@ def _add_timing(parser, frames: int, warmup: int) -> None:
 
 def run_bench(args) -> int:
     from hyperbones.jobs.bench import bench
-    from hyperbones.jobs.timing import speedups
+    from hyperbones.jobs.timing import speedups, stage_table
 
     records = bench(options.comma_list(args.methods), options.comma_list(args.garments), vertices=args.vertices,
                     device=args.device, frames=args.frames, warmup=args.warmup, late=args.late,
                     checkpoint=args.checkpoint, uv_resolution=args.uv_resolution, progress=not args.quiet,
-                    runtime=args.runtime)
-    _report_records(records, args.json, speedups(records))
+                    runtime=args.runtime, batch=args.batch, profile=args.profile)
+    notes = speedups(records)
+    profiled = [record for record in records if record.stages]
+    if args.profile:
+        unprofiled = sorted({record.method for record in records} - {record.method for record in profiled})
+        if unprofiled:
+            notes.append(f"(--profile: no stage table for {', '.join(unprofiled)}, which have no per-frame runtime)")
+    _report_records(records, args.json, notes, [stage_table(record) for record in profiled])
     return 0
 
 
+CROWD_HELP = ("time a crowd of N characters stepped together by one Simulator (hyperbones and hyperbones-raw only) "
+              "instead of each garment alone: the characters cycle through --garments and 4 body shapes (each "
+              "garment x body draped and encoded once), each walking its own retargeted walk; the record, garment "
+              "'crowd of N (...)', holds ms per character-frame, i.e. frame time / N (default: 1)")
+"""--batch's help (bench.CROWD_METHODS and CROWD_BODIES, written out: importing bench would cost
+--help seconds of torch)."""
+
+
 def add_bench(sub) -> None:
-    bench = sub.add_parser("bench", help="median ms per frame of each method on each garment",
+    bench = sub.add_parser("bench", help="ms per frame (median and 95th percentile) of each method on each garment",
                            description="Times each method frame by frame on the default body walking, after a warm-up "
-                                       "(CUDA timings synchronised). Prints a table; --json writes records "
-                                       "{method, garment, vertices, device, batch, ms_per_frame, from_frame}.")
+                                       "(CUDA timings synchronised): prints the median and the 95th percentile of the "
+                                       "frames' times in a table; --json writes records {method, garment, vertices, "
+                                       "device, batch, ms_per_frame (the median), p95_ms, from_frame, stages}.")
     options.add_methods(bench, default="lbs,teacher")
     options.add_garments(bench)
     options.add_vertices(bench)
     options.add_device(bench)
     _add_timing(bench, frames=30, warmup=5)
+    bench.add_argument("--profile", action="store_true",
+                       help="also time each stage of the per-frame runtime (forward kinematics, Bone-Net, skinning, "
+                            "UV stages, follow, contact, projection) over the first timed block and print a table "
+                            "per method and garment: ms per frame, share of the median frame, their total; --json "
+                            "records them as 'stages' (empty for lbs and teacher, which have no such stages)")
+    bench.add_argument("--batch", type=int, default=1, metavar="N", help=CROWD_HELP)
     options.add_checkpoint(bench)
     options.add_uv_resolution(bench)
     options.add_runtime(bench)
@@ -263,11 +288,14 @@ def run_bench_runtime(args) -> int:
 
 
 def add_bench_runtime(sub) -> None:
-    bench_rt = sub.add_parser("bench-runtime", help="ms per frame of the per-frame runtime on saved identity caches",
+    bench_rt = sub.add_parser("bench-runtime",
+                              help="ms per frame (median, 95th percentile) of the per-frame runtime on saved identity "
+                                   "caches",
                               description="Times Simulator.step (Module A and the follow; no body, so no contact) on "
                                           "identity caches (Identity.save) over a motion .npz (hyperbones motion "
                                           "NAME --out FILE), BATCH characters at once; needs neither the body model "
-                                          "nor the teacher. Prints a table; --json writes the records.")
+                                          "nor the teacher. Prints the median and 95th percentile of the frames' "
+                                          "times (for the whole batch) in a table; --json writes the records.")
     bench_rt.add_argument("--identity", action="append", required=True, help="an identity cache (repeatable)")
     bench_rt.add_argument("--motion", required=True, help="motion .npz from `hyperbones motion`")
     options.add_checkpoint(bench_rt, help="HyperBones checkpoint (default: untrained weights)")

@@ -64,7 +64,8 @@ import torch
 
 from hyperbones.body.anny_body import Body
 from hyperbones.garment.garment import Garment
-from hyperbones.geometry.proximity import BodyProximity, closest_points_on_faces, face_planes, push_outside
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.surface import closest_points_on_faces, face_planes, push_outside
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import (FRICTION_COEFFICIENT, FRICTION_CONTACT_RADIUS, GRAVITY, bending_energy,
                                          collision_energy, friction_energy, gravity_energy, stretching_energy)

@@ -5,7 +5,8 @@ Needs only Module A, identity caches (``Identity.save``) and a motion ``.npz`` (
 motion NAME --out FILE``): no body model, teacher or Warp, so it runs wherever torch does
 (a deployment target, a GPU machine). Each identity is stepped through the motion, ``batch``
 copies at once (one ``Simulator`` over ``batch`` characters); the first ``warmup`` frames
-are not timed, then the median of the per-frame times is reported (CUDA synchronised).
+are not timed, then the median and 95th percentile of the per-frame times are reported (CUDA
+synchronised).
 Without a checkpoint, Module A's weights are freshly initialised: the timing is the same.
 """
 
@@ -42,10 +43,10 @@ def load_motion_npz(path: str | Path) -> tuple[torch.Tensor, torch.Tensor]:
 def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | None = None,
                   uv_resolution: int | None = None, device: str = "cpu", batch: int = 1, frames: int = 60,
                   warmup: int = 10, late: int | None = None, runtime: str | None = None) -> list[BenchRecord]:
-    """One record per identity cache: median ms per frame (for the whole batch) of ``Simulator.step``;
-    with ``late``, a second record for the frames from ``late`` on (past the motion's end the
-    pose is held). ``runtime``: ``--runtime`` settings over the defaults (no body here, so
-    only the follow's matter)."""
+    """One record per identity cache: the median and 95th percentile ms per frame (for the
+    whole batch) of ``Simulator.step``; with ``late``, a second record for the frames from
+    ``late`` on (past the motion's end the pose is held). ``runtime``: ``--runtime`` settings
+    over the defaults (no body here, so only the follow's matter)."""
     if batch < 1 or frames < 1 or warmup < 0:
         raise ParameterError("--batch and --frames must be >= 1, --warmup >= 0")
     the_device = torch.device(device)
@@ -74,8 +75,8 @@ def bench_runtime(identity_paths: list[str], motion: str, *, checkpoint: str | N
             simulator.step(rotations[t].expand(batch, 31, 3, 3).to(the_device),
                            roots[t].expand(batch, 3).to(the_device))
 
-        for first, median in timed_blocks(step, the_device, warmup, frames, late):
+        for block in timed_blocks(step, the_device, warmup, frames, late):
             records.append(BenchRecord(f"hyperbones@{resolution}", identity.name, identity.num_vertices,
-                                       the_device.type, batch, median, first))
+                                       the_device.type, batch, block.median, block.p95, block.first))
     return records
 

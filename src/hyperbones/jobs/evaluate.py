@@ -16,7 +16,8 @@ from hyperbones.runtime.config import parse_overrides
 
 COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collision_pct", "ε_c % (d<0)"),
            ("collision_1mm_pct", "ε_c % (d<1mm)"), ("strain", "strain J"), ("bending", "bending J"),
-           ("inertia", "inertia J"), ("gravity", "gravity J"), ("ms_per_frame", "ms/frame")]
+           ("inertia", "inertia J"), ("gravity", "gravity J"), ("ms_median", "ms/frame (median)"),
+           ("ms_p95", "ms/frame (p95)")]
 
 
 SPLITS = ("validation", "test")

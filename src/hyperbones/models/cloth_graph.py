@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import torch
 
-from hyperbones.geometry.proximity import Nearest
+from hyperbones.geometry.surface import Nearest
 from hyperbones.models.mgn import EdgeSet
 from hyperbones.physics.energies import GRAVITY, bending_energy, stretching_energy
 from hyperbones.physics.material import Material, material_features

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import torch
 
-from hyperbones.geometry.proximity import Nearest, face_planes, surface_points
+from hyperbones.geometry.surface import Nearest, face_planes, surface_points
 
 TRACK_REACH = 0.02  # m: vertices this near the skin before a step keep their face as a contact plane
 

@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import torch
 
-from hyperbones.geometry.proximity import BodyProximity, Nearest, push_outside
+from hyperbones.geometry.proximity import BodyProximity
+
+from hyperbones.geometry.surface import Nearest, push_outside
 from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.physics.strain_limit import StrainLimiter
 

@@ -12,8 +12,10 @@ with a the input positions and d_e the current edge vector scaled to its rest le
 (or clamped to a band around it). The local step sets every d_e at once; the global step is
 one solve with the constant matrix DᵀD + αI (D: the (E,V) edge-difference matrix), factorised
 once per garment. Contact half-spaces (``physics.contact_planes.ContactPlanes``) are enforced after
-every solve. The solve runs on the CPU whatever the device of the positions. Measurements
-behind the defaults: ``docs/experiments/*-runtime-contact-projection.md``.
+every solve. Two solvers give the same answer: on the CPU a sparse LU factor (scipy), on a GPU
+the matrix's dense inverse (one product per solve, shared by every garment of that topology),
+so the whole projection stays in torch there. Measurements behind the defaults:
+``docs/experiments/*-runtime-contact-projection.md``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import numpy as np
 import torch
 
 from hyperbones.errors import ParameterError
+from hyperbones.geometry.sparse import to_csr
 from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.runtime.config import RuntimeConfig
 
@@ -36,11 +39,17 @@ class EdgeProjection:
     def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor,
                  iterations: int = RuntimeConfig.projection_iterations, anchor: float = RuntimeConfig.projection_anchor,
                  stretch: float = RuntimeConfig.projection_stretch,
-                 compression: float = RuntimeConfig.projection_compression):
+                 compression: float = RuntimeConfig.projection_compression,
+                 chebyshev: float = RuntimeConfig.projection_chebyshev, solver: str = "auto",
+                 device: str | torch.device = "cpu"):
         """iterations: local/global steps per ``project``; anchor: α; stretch, compression: the
         band of edge lengths left alone, as fractions of the rest length (0, 0: every edge is
         pulled to its rest length; the teacher's limiter uses ``physics.strain_limit``'s band).
-        Factorised with a minimum-degree ordering in single precision (the fastest measured)."""
+        chebyshev: ρ of the Chebyshev semi-iterative acceleration (0: plain iterations; see
+        ``chebyshev_weights``).
+        solver: "sparse" (scipy's LU, minimum-degree ordering, single precision: the fastest
+        measured on a CPU; positions on any device are solved on the CPU), "dense" (the inverse
+        in torch on ``device``: no host round trip, for GPUs) or "auto" (dense on CUDA)."""
         import scipy.sparse  # here, so that importing this module stays light
         import scipy.sparse.linalg
 
@@ -48,6 +57,8 @@ class EdgeProjection:
 
         if iterations < 1 or anchor <= 0:
             raise ParameterError(f"edge projection needs iterations >= 1 and anchor > 0, got {iterations}, {anchor}")
+        if solver not in SOLVERS:
+            raise ParameterError(f"edge projection solver must be one of {', '.join(SOLVERS)}, got {solver!r}")
         if not (0.0 <= compression < 1.0 and stretch >= 0.0):
             raise ParameterError(f"edge projection needs 0 <= compression < 1 and stretch >= 0, got {compression}, "
                                  f"{stretch}")
@@ -62,30 +73,120 @@ class EdgeProjection:
                                                   dtype=np.float32)
         self.gather = self.difference.T.tocsr()
         system = (self.gather @ self.difference + anchor * scipy.sparse.identity(num_vertices, dtype=np.float32))
-        self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                                              options={"SymmetricMode": True}).solve
         lengths = rest.edge_lengths.numpy().astype(np.float32)
         self.low, self.high = lengths * (1.0 - compression), lengths * (1.0 + stretch)
         self.anchor, self.iterations = anchor, iterations
+        self.weights = chebyshev_weights(iterations, chebyshev)
+        self.device = torch.device(device)
+        if solver == "auto":
+            solver = "dense" if self.device.type == "cuda" else "sparse"
+        self.solver = solver
+        if solver == "sparse":
+            self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                                                  options={"SymmetricMode": True}).solve
+        else:
+            self.inverse = _dense_inverse(system, edges, self.device)  # (V,V)
+            self.difference_t = _sparse_csr(self.difference, self.device)  # (E,V)
+            self.gather_t = _sparse_csr(self.gather, self.device)  # (V,E)
+            self.low_t = torch.from_numpy(self.low).to(self.device)
+            self.high_t = torch.from_numpy(self.high).to(self.device)
 
     def project(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
         """(V,3) -> (V,3) after ``iterations`` local/global steps; ``contact`` (a
         ``ContactPlanes``) is enforced after each."""
+        if self.solver == "dense":
+            return self._project_dense(positions, contact)
         device, dtype = positions.device, positions.dtype
         world = positions.detach().cpu().double()
         # Solved about the garment's centre: single precision keeps 10x more of a 10 cm
         # offset than of a 1 m position (a rigidly moved garment comes back within 1e-5 m).
         centre = world.mean(0)
-        if contact is not None:  # the planes, moved with the origin
-            contact = contact.to("cpu")
-            contact = ContactPlanes(contact.vertex, (contact.point.double() - centre).float(), contact.normal.float())
         x = (world - centre).float().numpy()
+        planes = None
+        if contact is not None and len(contact.vertex):  # the planes, moved with the origin
+            contact = contact.to("cpu")
+            planes = (contact.vertex.numpy(), (contact.point.double() - centre).float().numpy(),
+                      contact.normal.float().numpy())
         target = self.anchor * x
-        for _ in range(self.iterations):
+        previous = x
+        for omega in self.weights:
             along = self.difference @ x
-            length = np.linalg.norm(along, axis=1).clip(1e-12)
+            length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
             wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
-            x = self.solve(self.gather @ wanted + target)
-            if contact is not None:
-                x = contact.project(torch.from_numpy(x)).numpy()
+            solved = self.solve(self.gather @ wanted + target)
+            if omega != 1.0:  # Chebyshev: over-step from the iterate before last
+                solved = omega * (solved - previous) + previous
+            if planes is not None:
+                solved = _onto_planes(solved, *planes)
+            previous, x = x, solved
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)
+
+    def _project_dense(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
+        """``project`` in torch on the solver's device (the dense solver)."""
+        dtype = positions.dtype
+        world = positions.detach().to(self.device, torch.float64)
+        centre = world.mean(0)
+        x = (world - centre).float()
+        if contact is not None:
+            contact = contact.to(self.device)
+            contact = ContactPlanes(contact.vertex, (contact.point.double() - centre).float(), contact.normal.float())
+        target = self.anchor * x
+        previous = x
+        for omega in self.weights:
+            along = self.difference_t @ x
+            length = along.norm(dim=1).clamp_min(1e-12)
+            wanted = along * (torch.minimum(torch.maximum(length, self.low_t), self.high_t) / length)[:, None]
+            solved = self.inverse @ (self.gather_t @ wanted + target)
+            if omega != 1.0:
+                solved = omega * (solved - previous) + previous
+            if contact is not None:
+                solved = contact.project(solved)
+            previous, x = x, solved
+        return (x.double() + centre).to(device=positions.device, dtype=dtype)
+
+
+SOLVERS = ("auto", "sparse", "dense")
+
+
+def chebyshev_weights(iterations: int, rho: float) -> list[float]:
+    """ω_k of Chebyshev semi-iterative acceleration (Wang 2015, "A Chebyshev Semi-Iterative
+    Approach for Accelerating Projective and Position-based Dynamics"): iterate k becomes
+    ω_k (x̂_k − x_{k−2}) + x_{k−2}, x̂_k the plain local/global step, with ω_1 = 1,
+    ω_2 = 2/(2−ρ²), ω_k = 4/(4−ρ² ω_{k−1}); ρ: the plain iteration's convergence rate
+    (0: every ω is 1, plain iterations)."""
+    if not 0.0 <= rho < 1.0:
+        raise ParameterError(f"the projection's Chebyshev rho must be in [0, 1), got {rho}")
+    weights: list[float] = []
+    for k in range(iterations):
+        weights.append(1.0 if k == 0 else 2.0 / (2.0 - rho * rho) if k == 1 else 4.0 / (4.0 - rho * rho * weights[-1]))
+    return weights
+_INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology
+
+
+def _dense_inverse(system, edges: np.ndarray, device: torch.device) -> torch.Tensor:
+    """The (V,V) float32 inverse of the sparse SPD ``system`` on ``device`` (Cholesky in
+    double precision there), cached by topology and anchor."""
+    key = (str(device), edges.tobytes(), float(system.diagonal().min()), system.shape[0])
+    if key not in _INVERSES:
+        dense = torch.from_numpy(system.toarray()).to(device=device, dtype=torch.float64)
+        _INVERSES[key] = torch.cholesky_inverse(torch.linalg.cholesky(dense)).float()
+    return _INVERSES[key]
+
+
+def _sparse_csr(matrix, device: torch.device) -> torch.Tensor:
+    """A scipy sparse matrix as a torch sparse CSR tensor on ``device``."""
+    coo = matrix.tocoo()
+    indices = torch.from_numpy(np.stack([coo.row, coo.col]).astype(np.int64))
+    return to_csr(torch.sparse_coo_tensor(indices, torch.from_numpy(coo.data), coo.shape,
+                                          check_invariants=True)).to(device)
+
+
+def _onto_planes(x: np.ndarray, vertex: np.ndarray, point: np.ndarray, normal: np.ndarray) -> np.ndarray:
+    """``ContactPlanes.project`` in numpy: (V,3) positions with each constrained vertex (C,)
+    behind its plane (point (C,3), unit normal (C,3)) moved onto it; a vertex with several
+    planes gets the sum of their corrections, as there."""
+    gap = np.einsum("ij,ij->i", x[vertex] - point, normal)
+    push = np.maximum(-gap, 0.0)[:, None] * normal  # (C,3)
+    count = x.shape[0]
+    correction = np.stack([np.bincount(vertex, weights=push[:, k], minlength=count) for k in range(3)], axis=1)
+    return x + correction.astype(x.dtype)

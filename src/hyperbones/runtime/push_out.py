@@ -18,24 +18,31 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.runtime.config import RuntimeConfig
+from hyperbones.runtime.stage_clock import NO_CLOCK
 
 
 class BodyContact:
-    """One BVH per character over its body's triangles (F,3), refit every frame."""
+    """One nearest-face search per character over its body's triangles (F,3), moved to the
+    body every frame: Warp's BVH, or the same search in torch (``geometry.torch_proximity``,
+    where Warp is missing or the characters live on a GPU). Both give the exact nearest face."""
 
     def __init__(self, body_faces: torch.Tensor, characters: int, device: str | torch.device = "cpu",
-                 projections: list | None = None, config: RuntimeConfig = RuntimeConfig()):
+                 projections: list | None = None, config: RuntimeConfig = RuntimeConfig(), search: str = "auto"):
         """projections: one ``EdgeProjection`` per character, or None; config: the margin, query
         distances, rounds, plane reach and untangling (``config.untangle``: after the first
         push-out, bring back the vertices pushed out on the far side of a limb from their
-        neighbours; with projections only, whose edges say who the neighbours are)."""
-        from hyperbones.geometry.proximity import BodyProximity  # Warp: only when contact is asked for
-
+        neighbours; with projections only, whose edges say who the neighbours are);
+        search: "warp", "torch" or "auto" (``search_backend``)."""
         if projections is not None and len(projections) != characters:
             raise ParameterError(f"contact got {len(projections)} edge projections for {characters} characters")
         self.config = config
         self.margin = config.contact_margin
-        self.proximities = [BodyProximity(body_faces, device=device) for _ in range(characters)]
+        self.search = search_backend(search, device)
+        if self.search == "warp":
+            from hyperbones.geometry.proximity import BodyProximity as Search
+        else:
+            from hyperbones.geometry.torch_proximity import TorchProximity as Search
+        self.proximities = [Search(body_faces, device=device) for _ in range(characters)]
         self.projections = projections or [None] * characters
         # Per character with a projection: its garment's (E,2) edges and (V,) vertex degrees on the device.
         self.neighbours = [None if projection is None or not config.untangle else
@@ -45,6 +52,7 @@ class BodyContact:
         # Per character, the last call's last query (``Nearest`` of each garment vertex; its
         # points lie on that call's body).
         self.last_nearest: list = [None] * characters
+        self.clock = NO_CLOCK  # ``Simulator.profile`` sets a StageClock
 
     def forget(self) -> None:
         """Drop what the last call found (a new motion starts)."""
@@ -58,7 +66,7 @@ class BodyContact:
         nearest = self.last_nearest[character]
         if nearest is None:
             return None
-        from hyperbones.geometry.proximity import surface_points
+        from hyperbones.geometry.surface import surface_points
 
         now = surface_points(body, self.proximities[character].faces, nearest.face, nearest.barycentric)
         return (now - nearest.point) * nearest.found[:, None], nearest.signed_distance
@@ -66,6 +74,7 @@ class BodyContact:
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
         pushed out (and, with projections, ``contact_rounds`` times projected and pushed out)."""
+        from hyperbones.geometry.surface import surface_points
         from hyperbones.physics.contact_planes import ContactPlanes
 
         config = self.config
@@ -75,25 +84,45 @@ class BodyContact:
         out = []
         for index, (proximity, projection, neighbours, garment, body) in enumerate(
                 zip(self.proximities, self.projections, self.neighbours, garments, bodies)):
-            proximity.update(body)
-            garment, nearest = self._push_out(proximity, garment)
+            clock = self.clock
+            with clock.stage("contact queries"):
+                proximity.update(body)
+                last = self.last_nearest[index]
+                # Last frame's skin points, where the body is now: each bounds its vertex's search.
+                skin = None if last is None else torch.where(
+                    last.found[:, None], surface_points(body, proximity.faces, last.face, last.barycentric),
+                    torch.nan)
+                queried_at = garment  # (V,3) where each row of ``nearest`` was searched from
+                garment, nearest = self._push_out(proximity, garment, config.query_distance, skin)
+                searched = config.query_distance  # how far every search looked
             if neighbours is not None:
-                garment, nearest = self._untangle(proximity, *neighbours, garment, nearest)
+                with clock.stage("untangling"):
+                    garment, nearest, queried_at = self._untangle(proximity, *neighbours, garment, nearest,
+                                                                  queried_at)
             for _ in range(config.contact_rounds if projection is not None else 0):
-                planes = ContactPlanes.nearest(nearest, nearest.signed_distance < config.plane_reach, self.margin)
-                garment = projection.project(garment, planes)
+                with clock.stage("projection"):
+                    planes = ContactPlanes.nearest(nearest, nearest.signed_distance < config.plane_reach, self.margin)
+                    garment = projection.project(garment, planes)
                 # The projection moves vertices away from the skin planes too; what it moved
                 # inside comes out again.
-                garment, nearest = self._push_out(proximity, garment, config.round_query_distance)
+                with clock.stage("contact queries"):
+                    garment, nearest, queried_at = self._search_again(proximity, garment, nearest, queried_at,
+                                                                      searched)
+                    searched = config.round_query_distance
             self.last_nearest[index] = nearest
             out.append(garment)
         return out
 
-    def _untangle(self, proximity, edges: torch.Tensor, degree: torch.Tensor, garment: torch.Tensor, nearest):
+    def _untangle(self, proximity, edges: torch.Tensor, degree: torch.Tensor, garment: torch.Tensor, nearest,
+                  queried_at: torch.Tensor):
         """Vertices near the skin whose face normal points against the sum of their neighbours'
         (a limb that went through the cloth: the nearest-face push-out sent these out on its far
         side, their neighbours on the near one, stretching the edges between round the limb)
-        moved to their neighbours' mean and pushed out again. edges: (E,2); degree: (V,)."""
+        moved to their neighbours' mean and pushed out again. edges: (E,2); degree: (V,);
+        ``nearest`` was queried at ``queried_at`` (V,3), before the push-out that led to ``garment``.
+
+        Only the vertices that moved since that query are searched again: the others would find
+        what they found then (same point, same body), so the answer is that of a full search."""
         first, second = edges[:, 0], edges[:, 1]
         near = (nearest.found & (nearest.signed_distance < self.config.plane_reach))[:, None].to(garment.dtype)
         normal = nearest.normal * near
@@ -101,19 +130,55 @@ class BodyContact:
         against = (normal * around).sum(1) < -self.config.untangle_cosine * around.norm(dim=1)
         index = against.nonzero().squeeze(1)
         if not len(index):
-            return garment, nearest
+            return garment, nearest, queried_at
         total = torch.zeros_like(garment).index_add_(0, first, garment[second]).index_add_(0, second, garment[first])
         garment = garment.index_copy(0, index, total[index] / degree[index, None].clamp_min(1).to(garment.dtype))
-        return self._push_out(proximity, garment)
+        moved = (garment != queried_at).any(1).nonzero().squeeze(1)
+        pushed, found = self._push_out(proximity, garment[moved], self.config.query_distance,
+                                       _skin_points(nearest)[moved])
+        return (garment.index_copy(0, moved, pushed), nearest.with_rows(moved, found),
+                queried_at.index_copy(0, moved, garment[moved]))
 
-    def _push_out(self, proximity, garment: torch.Tensor, query_distance: float | None = None):
+    def _search_again(self, proximity, garment: torch.Tensor, nearest, queried_at: torch.Tensor, searched: float):
+        """The push-out after a projection round, searching only where the answer can have
+        changed: (V,3) garment, the ``Nearest`` found from ``queried_at`` (V,3) on this body
+        within ``searched`` -> (garment pushed out, the nearest skin of each vertex, where each
+        was searched from).
+
+        A vertex found outside at distance d that moved by s since is still outside, at least
+        d − s from the body. Where no face was within ``searched`` and ``searched`` − s exceeds
+        this search's range, it still has none (exact). Where d − s exceeds
+        ``config.round_search_gap`` (more than the margin), the vertex is certainly clear of the
+        body and keeps its record (skin point and distance as found then); only the planes of the
+        next round and the next frame's follow see that approximation, never the push-out.
+        """
+        config = self.config
+        shift = (garment - queried_at).norm(dim=1)
+        # Only a vertex found outside can be certified clear: one found inside stays inside
+        # however far it is from the surface, and must be pushed out.
+        clear = torch.where(nearest.found, nearest.signed_distance - shift, torch.full_like(shift, searched) - shift)
+        gap = torch.where(nearest.found, torch.full_like(shift, config.round_search_gap),
+                          torch.full_like(shift, config.round_query_distance))
+        search = (clear <= gap).nonzero().squeeze(1)
+        pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
+                                       _skin_points(nearest)[search])
+        # The rest keep their record as it was found from where it was searched (``queried_at``),
+        # which is what bounds their distance in the next round.
+        return (garment.index_copy(0, search, pushed), nearest.with_rows(search, found),
+                queried_at.index_copy(0, search, garment[search]))
+
+    def _push_out(self, proximity, garment: torch.Tensor, query_distance: float, skin: torch.Tensor | None = None):
         """(V,3) -> (V,3) with every vertex inside the body or within the margin moved out to
         the margin (up to ``push_rounds`` projections), and the first query's ``Nearest`` (faces
-        looked for within ``query_distance``, default ``config.query_distance``)."""
-        from hyperbones.geometry.proximity import push_outside
+        looked for within ``query_distance``).
 
-        query_distance = self.config.query_distance if query_distance is None else query_distance
-        nearest = proximity.query(garment, max_distance=query_distance)
+        skin: (V,3) a point on the body's surface as it is now for each vertex (NaN where none
+        is known), e.g. where the last query found its nearest face. The distance to it bounds
+        the vertex's distance to the body, so the search looks no farther: same answer, less work.
+        """
+        from hyperbones.geometry.surface import push_outside
+
+        nearest = proximity.query(garment, max_distance=_search_ranges(garment, skin, query_distance))
         moved = nearest.found & (nearest.signed_distance < self.margin)
         garment = push_outside(garment, nearest, self.margin)
         for _ in range(self.config.push_rounds - 1):
@@ -121,10 +186,47 @@ class BodyContact:
             index = torch.nonzero(moved).squeeze(1)
             if len(index) == 0:
                 break
-            again = proximity.query(garment[index], max_distance=self.config.query_distance)
+            # Each moved vertex is the margin away from the face it left: nothing farther matters.
+            again = proximity.query(garment[index], max_distance=_search_ranges(
+                garment[index], nearest.point[index], self.config.query_distance))
             inside = again.found & (again.signed_distance < 0)
             if not bool(inside.any()):
                 break
             garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
             moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
         return garment, nearest
+
+
+SEARCHES = ("auto", "warp", "torch")
+
+
+def search_backend(search: str, device: str | torch.device) -> str:
+    """The nearest-face search to use: ``search`` as asked, or for "auto" Warp's BVH on the CPU
+    when Warp is installed (the fastest measured there) and the torch search otherwise."""
+    if search not in SEARCHES:
+        raise ParameterError(f"contact search must be one of {', '.join(SEARCHES)}, got {search!r}")
+    if search != "auto":
+        return search
+    if torch.device(device).type != "cpu":
+        return "torch"
+    import importlib.util
+
+    try:
+        return "warp" if importlib.util.find_spec("warp") is not None else "torch"
+    except ValueError:  # warp blocked in sys.modules (set to None)
+        return "torch"
+
+
+def _skin_points(nearest) -> torch.Tensor:
+    """(V,3) the skin points a query found (NaN where it found none)."""
+    return torch.where(nearest.found[:, None], nearest.point, torch.nan)
+
+
+def _search_ranges(points: torch.Tensor, skin: torch.Tensor | None, query_distance: float) -> torch.Tensor | float:
+    """How far to look from each of (V,3) ``points``: ``query_distance``, or less where a known
+    skin point (V,3) (NaN: none) is nearer; padded by float32's rounding so the nearest face
+    is never cut off."""
+    if skin is None:
+        return query_distance
+    bound = (points - skin).norm(dim=1) * (1.0 + 1e-5) + 1e-6
+    return torch.where(bound < query_distance, bound, torch.full_like(bound, query_distance))

@@ -32,6 +32,7 @@ from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.edge_projection import EdgeProjection
 from hyperbones.runtime.identity import Identity
+from hyperbones.runtime.stage_clock import NO_CLOCK
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
@@ -84,7 +85,8 @@ class IdentityBatch:
 
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
-                   positions: torch.Tensor, to_local: torch.Tensor) -> list[torch.Tensor]:
+                   positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK,
+                   bfloat16: bool = False) -> list[torch.Tensor]:
     """One frame of Module A for N characters (differentiable; the trainer calls it too).
 
     Args:
@@ -92,26 +94,34 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         window: (N,K,B,3) world bone positions at t−K+1 … t (K: ``module_a.config.window_frames``).
         rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
         to_local: (N,4,4) world -> local frame of each character at t.
+        clock: a ``StageClock`` to charge each stage's time to (none by default).
+        bfloat16: the Conv-MLP under bfloat16 autocast.
 
     Returns:
         N tensors (V_i,3): world garment positions at t.
     """
     identities = batch.identities
-    local_window = transform_points(to_local[:, None], window)
-    delta, pose_embedding = module_a.bone_corrections(local_window, batch.codes, batch.film)
-    local_rotations = to_local[:, None, :3, :3] @ rotations
-    local_positions = transform_points(to_local, positions)
-    local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
-    stage_one = [
-        linear_blend_skinning(identity.rest_vertices, identity.weights,
-                              skinning_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
-                                                  local_positions[i:i + 1]))[0]
-        for i, identity in enumerate(identities)]
+    with clock.stage("Bone-Net"):
+        local_window = transform_points(to_local[:, None], window)
+        delta, pose_embedding = module_a.bone_corrections(local_window, batch.codes, batch.film)
+        local_rotations = to_local[:, None, :3, :3] @ rotations
+        local_positions = transform_points(to_local, positions)
+        local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
+    with clock.stage("garment skinning"):
+        stage_one = [
+            linear_blend_skinning(identity.rest_vertices, identity.weights,
+                                  skinning_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
+                                                      local_positions[i:i + 1]))[0]
+            for i, identity in enumerate(identities)]
     if module_a.refiner is not None:
-        images = torch.cat([identity.raster.rasterize(points[None]) for identity, points in zip(identities, stage_one)])
-        displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding)
-        stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
-                     for i, (identity, points) in enumerate(zip(identities, stage_one))]
+        with clock.stage("UV raster"):
+            images = torch.cat([identity.raster.rasterize(points[None])
+                                for identity, points in zip(identities, stage_one)])
+        with clock.stage("Conv-MLP"), torch.autocast(images.device.type, torch.bfloat16, enabled=bfloat16):
+            displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding).float()
+        with clock.stage("UV sampling"):
+            stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
+                         for i, (identity, points) in enumerate(zip(identities, stage_one))]
     to_world = torch.linalg.inv(to_local)
     return [transform_points(to_world[i], points) for i, points in enumerate(stage_one)]
 
@@ -121,15 +131,19 @@ class Simulator:
 
     identities: one cache per character (``encode_identity`` or ``Identity.load``), all at one
     UV resolution (the Conv-MLP is fully convolutional: it runs at the resolution the caches
-    were made at, which need not be the one it was trained at).
+    were made at, which need not be the one it was trained at), or remade at
+    ``config.uv_resolution`` when that is set.
     The first frame fills the window (the characters start at rest).
     """
 
     def __init__(self, module_a: ModuleA, identities: list[Identity], device: str | torch.device = "cpu",
-                 body_faces: torch.Tensor | None = None, config: RuntimeConfig = RuntimeConfig()):
+                 body_faces: torch.Tensor | None = None, config: RuntimeConfig = RuntimeConfig(),
+                 search: str = "auto"):
         """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
         them and ``config.contact``, ``step`` can take the posed bodies and resolve contact.
-        config: every setting of the follow, contact and projection steps."""
+        config: every setting of the follow, contact and projection steps; search: the
+        nearest-face search, "warp", "torch" or "auto" (``runtime.push_out.search_backend``:
+        the answers are the same, only where it runs and its speed differ)."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")
         if not isinstance(config, RuntimeConfig):
@@ -138,6 +152,9 @@ class Simulator:
         if bones != {module_a.config.num_bones}:
             raise ParameterError(f"identities have {sorted(bones)} virtual bones, the model expects "
                                  f"{module_a.config.num_bones}")
+        if config.uv_resolution:
+            remade = {id(identity): identity.at_resolution(config.uv_resolution) for identity in identities}
+            identities = [remade[id(identity)] for identity in identities]  # a repeated one stays one object
         resolutions = {identity.raster.resolution for identity in identities}
         if len(resolutions) > 1:
             raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
@@ -155,42 +172,53 @@ class Simulator:
         self.last_to_local: torch.Tensor | None = None  # (N,4,4): its frame's world -> heading frame
         self.last_motion: torch.Tensor | None = None  # (N,4,4): the heading frames' world motion into it
         self.contact = None
+        self.clock = NO_CLOCK  # ``profile`` sets a StageClock
         if body_faces is not None and config.contact:
             from hyperbones.runtime.push_out import BodyContact
 
             projections = None
             if config.projection_iterations > 0:
-                projections = [EdgeProjection(identity.rest_vertices, identity.faces, config.projection_iterations,
-                                              config.projection_anchor, config.projection_stretch,
-                                              config.projection_compression)
-                               for identity in self.identities]
+                made: dict[int, EdgeProjection] = {}  # one factorisation per distinct identity of a crowd
+                for source, identity in zip(identities, self.identities):
+                    if id(source) not in made:
+                        made[id(source)] = EdgeProjection(
+                            identity.rest_vertices, identity.faces, config.projection_iterations,
+                            config.projection_anchor, config.projection_stretch, config.projection_compression,
+                            config.projection_chebyshev, device=self.device)
+                projections = [made[id(source)] for source in identities]
             self.contact = BodyContact(body_faces, len(identities), self.device, projections=projections,
-                                       config=config)
+                                       config=config, search=search)
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
              uv_resolution: int | None = None, config: RuntimeConfig | None = None,
              overrides: dict | None = None,
-             rest_vertices: list[torch.Tensor | None] | None = None) -> "Simulator":
+             rest_vertices: list[torch.Tensor | None] | None = None, search: str = "auto") -> "Simulator":
         """A simulator for (garment, body) pairs, each garment fitted to its body's canonical
         pose: Module B encodes every pair once with the model of ``checkpoint`` (default: the
-        shipped one). ``config``: the runtime's settings (default: the checkpoint's, else the
+        shipped one) at ``uv_resolution`` (default: ``config.uv_resolution``, else the model's).
+        ``config``: the runtime's settings (default: the checkpoint's, else the
         defaults), with ``overrides`` ({setting: value}, ``runtime.config.parse_overrides``)
         applied; with ``config.contact``, ``step`` may take the posed bodies (all characters
         share Anny's topology). ``rest_vertices``: each garment's rest shape (V_i,3), as
-        ``draped_garment`` returns it, where its bones bind (``VirtualBones.bind``)."""
+        ``draped_garment`` returns it, where its bones bind (``VirtualBones.bind``); ``search``:
+        the contact's nearest-face search (see the constructor)."""
         from hyperbones.runtime.identity import encode_identity
 
         payload = hyperbones_payload(checkpoint, device)
         model = model_of(payload, device)
+        config = replace(config or runtime_config_of(payload, checkpoint or SHIPPED_HYPERBONES), **(overrides or {}))
+        if uv_resolution:  # the config says what ran
+            config = replace(config, uv_resolution=uv_resolution)
         with torch.no_grad():
             rests = rest_vertices or [None] * len(characters)
             if len(rests) != len(characters):
                 raise ParameterError(f"{len(rests)} rest shapes for {len(characters)} characters")
-            identities = [encode_identity(model, garment, body, uv_resolution=uv_resolution, rest_vertices=rest)
+            resolution = config.uv_resolution or None
+            identities = [encode_identity(model, garment, body, uv_resolution=resolution, rest_vertices=rest)
                           for (garment, body), rest in zip(characters, rests)]
-        config = replace(config or runtime_config_of(payload, checkpoint or SHIPPED_HYPERBONES), **(overrides or {}))
-        return cls(model.runtime, identities, device, body_faces=characters[0][1].faces, config=config)
+        return cls(model.runtime, identities, device, body_faces=characters[0][1].faces, config=config,
+                   search=search)
 
     def _carried(self, character: int, motion: torch.Tensor,
                  body: torch.Tensor | None) -> tuple[torch.Tensor, torch.Tensor | None]:
@@ -205,6 +233,12 @@ class Simulator:
         near, far = self.config.follow_near, self.config.follow_far
         on_skin = 1.0 - ((distance - near) / (far - near)).clamp(0.0, 1.0)  # (V,)
         return carried + on_skin[:, None] * (self.last_output[character] + moved - carried), on_skin
+
+    def profile(self, clock=NO_CLOCK) -> None:
+        """Charge each stage of every later frame to ``clock`` (a ``StageClock``; ``NO_CLOCK``: stop)."""
+        self.clock = clock
+        if self.contact is not None:
+            self.contact.clock = clock
 
     def reset(self) -> None:
         """Forget the motion so far (the next step starts at rest)."""
@@ -227,33 +261,40 @@ class Simulator:
         if joint_rotations.shape != (count, 31, 3, 3) or root_translation.shape != (count, 3):
             raise ParameterError(f"step expects ({count},31,3,3) rotations and ({count},3) roots, got "
                                  f"{tuple(joint_rotations.shape)} and {tuple(root_translation.shape)}")
-        rotations_in = joint_rotations.detach().to("cpu", torch.float32)
-        roots = root_translation.detach().to("cpu", torch.float32)
-        joints = forward_kinematics(self.rest_joints, rotations_in, roots)
-        transforms = skinning_transforms(self.rest_joints, rotations_in, joints)  # (N,31,4,4)
-        rotations, positions = pose_bones(self.bone_joint_weights, self.bone_rest, transforms)
-        to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
-        rotations, positions = rotations.to(self.device), positions.to(self.device)
+        clock = self.clock
+        with clock.stage("forward kinematics"):
+            rotations_in = joint_rotations.detach().to("cpu", torch.float32)
+            roots = root_translation.detach().to("cpu", torch.float32)
+            joints = forward_kinematics(self.rest_joints, rotations_in, roots)
+            transforms = skinning_transforms(self.rest_joints, rotations_in, joints)  # (N,31,4,4)
+            rotations, positions = pose_bones(self.bone_joint_weights, self.bone_rest, transforms)
+            to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
+            rotations, positions = rotations.to(self.device), positions.to(self.device)
         if self.window is None:
             frames = self.module_a.config.window_frames
             self.window = positions[:, None].expand(count, frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local)
+        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local, clock,
+                                  self.config.bfloat16)
         bodies = body_vertices.to(self.device) if body_vertices is not None else None
         motion = None
         settings = self.config
         if settings.follows and self.last_output is not None:
-            motion = torch.linalg.inv(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
-            carrier = motion if self.last_motion is None else motion + settings.carry_lag * (self.last_motion - motion)
-            carried, on_skin = zip(*[self._carried(i, carrier[i], bodies[i] if bodies is not None else None)
-                                     for i in range(count)])
-            gap = settings.follow - settings.loose_follow
-            shares = [settings.follow if skin is None else settings.loose_follow + gap * skin[:, None]
-                      for skin in on_skin]  # N floats (no body) or (V_i,1)
-            garments = [start + share * (target - start) for start, target, share in zip(carried, garments, shares)]
+            with clock.stage("follow"):
+                motion = torch.linalg.inv(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
+                carrier = (motion if self.last_motion is None
+                           else motion + settings.carry_lag * (self.last_motion - motion))
+                carried, on_skin = zip(*[self._carried(i, carrier[i], bodies[i] if bodies is not None else None)
+                                         for i in range(count)])
+                gap = settings.follow - settings.loose_follow
+                shares = [settings.follow if skin is None else settings.loose_follow + gap * skin[:, None]
+                          for skin in on_skin]  # N floats (no body) or (V_i,1)
+                garments = [start + share * (target - start)
+                            for start, target, share in zip(carried, garments, shares)]
         if bodies is not None:
             garments = self.contact(garments, bodies)
         if settings.follows:
             self.last_output, self.last_to_local, self.last_motion = garments, to_local, motion
+        clock.frame()
         return garments

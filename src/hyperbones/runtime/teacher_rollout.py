@@ -19,7 +19,8 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.proximity import BodyProximity, Nearest, push_outside
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.surface import Nearest, push_outside
 from hyperbones.models.cloth_graph import FRAME_DT
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import COLLISION_EPSILON

@@ -33,7 +33,8 @@ from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
 from hyperbones.geometry.diffusion import diffuse, diffusion_steps
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.proximity import BodyProximity, surface_points
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.surface import surface_points
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.motion.load import load_motion

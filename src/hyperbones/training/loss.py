@@ -5,7 +5,7 @@ from __future__ import annotations
 import torch
 
 from hyperbones.geometry.diffusion import diffuse
-from hyperbones.geometry.proximity import Nearest, face_planes, surface_points
+from hyperbones.geometry.surface import Nearest, face_planes, surface_points
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import (
     COLLISION_EPSILON,

@@ -29,7 +29,8 @@ from tqdm import tqdm
 
 from hyperbones.devices import pick_device
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.proximity import BodyProximity, push_outside
+from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.surface import push_outside
 from hyperbones.models.loading import load_checkpoint, teacher_state
 from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.energies import COLLISION_EPSILON

@@ -1,0 +1,199 @@
+"""The runtime's benchmark for a GPU machine: prepared here, run there with torch alone.
+
+The project's GPU machines have Python with torch, numpy and scipy but neither Anny, Warp
+nor the drape, and take at most 64 MiB with them. ``prepare`` (here, where those are) writes
+what the per-frame runtime needs into one folder: the dress's identity caches at 2.5k, 5k and
+8k vertices on the default body, the body's skinning rig, the walk's joint rotations, and a
+copy of ``roma`` (pure Python, missing there). ``run`` (there, or here with ``--cpu``) times
+Module A alone at several UV resolutions and the whole runtime (follow, contact with the torch
+search, edge projection with the dense solver on a GPU), batches of characters, float32 and
+bfloat16, and prints one table. ``scripts/device/bench.sh`` wraps both.
+
+    python -m hyperbones.jobs.device_bench prepare --out .device/bench
+    python -m hyperbones.jobs.device_bench run --folder .device/bench [--device cpu] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import torch
+
+VERTICES = (2500, 5000, 8000)
+RESOLUTIONS = (64, 128, 512)  # 512: the paper's
+BATCHES = (1, 64, 1024)
+RUNTIME_BATCHES = (1, 8)  # contact and projection still loop over characters
+GARMENT = "dress"
+
+
+@dataclass
+class DeviceRow:
+    """One timing: what ran, on how many characters, and the median ms per frame and per character-frame."""
+
+    garment: str
+    vertices: int
+    what: str
+    batch: int
+    dtype: str
+    ms_per_frame: float | None  # None: did not fit in memory
+    ms_per_character: float | None
+
+
+def prepare(out: str | Path, vertices: tuple[int, ...] = VERTICES, garment: str = GARMENT) -> list[Path]:
+    """Write the benchmark's inputs into ``out`` (needs Anny and Warp); returns the files written."""
+    import importlib.util
+
+    from hyperbones.body.anny_body import body_for
+    from hyperbones.body.rig import BodyRig
+    from hyperbones.body.shape import BodyShape
+    from hyperbones.garment.draped import draped_garment
+    from hyperbones.models.loading import hyperbones_from_checkpoint
+    from hyperbones.motion.load import load_motion
+    from hyperbones.runtime.identity import encode_identity
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    body = body_for(BodyShape())
+    model = hyperbones_from_checkpoint(None, "cpu")
+    written = []
+    for count in vertices:
+        draped, rest = draped_garment(garment, body, vertices=count)
+        with torch.no_grad():
+            identity = encode_identity(model, draped, body, name=f"{garment}-{count}", rest_vertices=rest)
+        written.append(identity.save(out / f"{garment}-{count}.identity.pt"))
+    written.append(BodyRig.of(body).save(out / "body.rig.pt"))
+    motion = load_motion("walk", body)
+    roots = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False).joint_positions[:, 0]
+    torch.save({"rotations": motion.joint_rotations.float(), "roots": roots.float()}, out / "walk.pt")
+    written.append(out / "walk.pt")
+    roma = Path(importlib.util.find_spec("roma").submodule_search_locations[0])
+    shutil.copytree(roma, out / "site" / "roma", dirs_exist_ok=True,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    written.append(out / "site" / "roma")
+    return written
+
+
+def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: int = 30,
+        warmup: int = 10) -> list[DeviceRow]:
+    """Time every prepared identity (largest last); ``quick``: the smallest one only, 64², batches
+    1 and 2, float32, a few frames (the suite's check that the job runs)."""
+    from hyperbones.body.rig import BodyRig
+    from hyperbones.jobs.timing import timed_blocks
+    from hyperbones.models.loading import hyperbones_payload, load_module_a
+    from hyperbones.runtime.config import RAW, RuntimeConfig
+    from hyperbones.runtime.identity import Identity
+    from hyperbones.runtime.simulator import Simulator, runtime_config_of
+
+    folder = Path(folder)
+    the_device = torch.device(device)
+    paths = sorted(folder.glob("*.identity.pt"), key=lambda p: Identity.load(p).num_vertices)
+    if not paths:
+        raise FileNotFoundError(f"{folder}: no *.identity.pt (run `prepare` first)")
+    rig = BodyRig.load(folder / "body.rig.pt", the_device)
+    walk = torch.load(folder / "walk.pt")
+    rotations, roots = walk["rotations"].to(the_device), walk["roots"].to(the_device)
+    shipped = runtime_config_of(hyperbones_payload(None, "cpu", whole=False))
+    module_a = load_module_a(None, the_device)
+    resolutions, batches, runtime_batches = RESOLUTIONS, BATCHES, RUNTIME_BATCHES
+    dtypes = (False, True)
+    if quick:
+        paths, resolutions, batches, runtime_batches, dtypes = paths[:1], (64,), (1, 2), (1,), (False,)
+        frames, warmup = 3, 1
+    rows = []
+    for path in paths:
+        identity = Identity.load(path)
+        bodies_at = _bodies(rig, rotations, roots)
+        jobs = [(f"Module A @ {r}²", replace(RuntimeConfig(**RAW), uv_resolution=r), batch, False)
+                for r in resolutions for batch in batches]
+        jobs += [(f"runtime @ {shipped.uv_resolution or 'model'}²", shipped, batch, True)
+                 for batch in runtime_batches]
+        for what, config, batch, contact in jobs:
+            for bfloat16 in dtypes:
+                row = DeviceRow(GARMENT, identity.num_vertices, what, batch, "bf16" if bfloat16 else "fp32",
+                                None, None)
+                try:
+                    simulator = Simulator(module_a, [identity] * batch, the_device,
+                                          body_faces=rig.faces if contact else None,
+                                          config=replace(config, bfloat16=bfloat16))
+
+                    def step(t: int, simulator=simulator, batch=batch, contact=contact) -> None:
+                        t = t % rotations.shape[0]
+                        simulator.step(rotations[t:t + 1].expand(batch, 31, 3, 3), roots[t:t + 1].expand(batch, 3),
+                                       bodies_at(t).expand(batch, -1, -1) if contact else None)
+
+                    block = timed_blocks(step, the_device, warmup, frames)[0]
+                    row.ms_per_frame, row.ms_per_character = block.median, block.median / batch
+                except torch.cuda.OutOfMemoryError:
+                    pass
+                finally:
+                    simulator = None
+                    if the_device.type == "cuda":
+                        torch.cuda.empty_cache()
+                rows.append(row)
+                print(_row_line(row), flush=True)
+    return rows
+
+
+def _bodies(rig, rotations: torch.Tensor, roots: torch.Tensor):
+    """t -> (1,Vb,3) the body posed at frame t (posed once per frame and kept)."""
+    cache: dict[int, torch.Tensor] = {}
+
+    def at(t: int) -> torch.Tensor:
+        if t not in cache:
+            cache[t] = rig.pose(rotations[t:t + 1], roots[t:t + 1])
+        return cache[t]
+
+    return at
+
+
+HEADER = ("| garment | vertices | what | batch | dtype | ms/frame (median) | ms per character-frame |\n"
+          "|---|---:|---|---:|---|---:|---:|")
+
+
+def _row_line(row: DeviceRow) -> str:
+    def ms(value):
+        return "out of memory" if value is None else f"{value:.3f}"
+
+    return (f"| {row.garment} | {row.vertices} | {row.what} | {row.batch} | {row.dtype} | {ms(row.ms_per_frame)} | "
+            f"{ms(row.ms_per_character)} |")
+
+
+def table(rows: list[DeviceRow], device: torch.device) -> str:
+    name = torch.cuda.get_device_name(device) if device.type == "cuda" else "CPU"
+    lines = [f"Device: {name}; torch {torch.__version__}; {time.strftime('%Y-%m-%d')}", "", HEADER]
+    return "\n".join(lines + [_row_line(row) for row in rows])
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hyperbones.jobs.device_bench", description=__doc__.split("\n")[0])
+    verbs = parser.add_subparsers(dest="verb", required=True)
+    prep = verbs.add_parser("prepare", help="write the inputs (needs Anny and Warp)")
+    prep.add_argument("--out", required=True)
+    prep.add_argument("--vertices", default=",".join(map(str, VERTICES)), help="garment sizes, comma-separated")
+    go = verbs.add_parser("run", help="time the runtime on the prepared inputs (torch alone)")
+    go.add_argument("--folder", required=True)
+    go.add_argument("--device", default="cuda" if torch.cuda.is_available() else "cpu")
+    go.add_argument("--quick", action="store_true", help="smallest garment, 64², batches 1-2, fp32, 3 frames")
+    go.add_argument("--out", default=None, help="also write the table to this file")
+    args = parser.parse_args(argv)
+    if args.verb == "prepare":
+        for path in prepare(args.out, tuple(int(v) for v in args.vertices.split(","))):
+            print(path)
+        return 0
+    print(HEADER, flush=True)
+    rows = run(args.folder, args.device, args.quick)
+    text = table(rows, torch.device(args.device))
+    if args.out:
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
+        Path(args.out).write_text(text + "\n")
+    print("\n" + text)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
