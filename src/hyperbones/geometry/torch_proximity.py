@@ -35,6 +35,9 @@ _PER_BOUND = 200  # bytes of temporaries per (point, box or disc) bound, for chu
 _PER_RECORD = 500  # bytes of temporaries per (point, face) exact distance
 
 
+_HIERARCHIES: dict = {}  # (faces' bytes, cluster size, group size, device) -> (slots, real)
+
+
 class TorchProximity:
     """Exact nearest body face of points in plain torch, with the API of ``BodyProximity``.
 
@@ -66,8 +69,13 @@ class TorchProximity:
         self._batched = vertices.dim() == 3
         vertices = vertices if self._batched else vertices[None]
         if self._slots is None:
-            slots, real = build_hierarchy(vertices[0][self.faces].cpu(), self.cluster_size, self.group_size)
-            self._slots, self._real = slots.to(self.device), real.to(self.device)
+            # Any body of this topology gives a valid hierarchy (the answers are exact either
+            # way), so the characters of a crowd share the first one built (0.5 s each).
+            key = (self.faces.cpu().numpy().tobytes(), self.cluster_size, self.group_size, str(self.device))
+            if key not in _HIERARCHIES:
+                slots, real = build_hierarchy(vertices[0][self.faces].cpu(), self.cluster_size, self.group_size)
+                _HIERARCHIES[key] = slots.to(self.device), real.to(self.device)
+            self._slots, self._real = _HIERARCHIES[key]
         self._body = _Hierarchy(vertices, self.faces, self._slots, self._real, self.cluster_size, self.group_size)
 
     def query(self, points: torch.Tensor, max_distance: float | torch.Tensor = 1.0) -> Nearest:
