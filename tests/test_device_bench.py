@@ -24,7 +24,7 @@ def test_the_device_bench_runs_on_the_cpu(tmp_path, body):
     table = (tmp_path / "out" / "bench.md").read_text()
     rows = [line.split("|")[1:-1] for line in table.splitlines() if line.startswith("| dress")]
     assert [(r[2].strip(), int(r[3])) for r in rows] == [("Module A @ 64²", 1), ("Module A @ 64²", 2),
-                                                         ("runtime @ 32²", 1)]
+                                                         ("runtime @ 48²", 1)]
     assert all(float(r[5]) > 0 and float(r[6]) > 0 for r in rows)
     assert float(rows[1][6]) <= float(rows[1][5])  # per character: the batch's frame shared by two
 

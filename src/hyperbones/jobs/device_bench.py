@@ -107,6 +107,7 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
     rows = []
     for path in paths:
         identity = Identity.load(path)
+        remade: dict[int, Identity] = {}
         bodies_at = _bodies(rig, rotations, roots)
         jobs = [(f"Module A @ {r}²", replace(RuntimeConfig(**RAW), uv_resolution=r), batch, False)
                 for r in resolutions for batch in batches]
@@ -117,7 +118,10 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
                 row = DeviceRow(GARMENT, identity.num_vertices, what, batch, "bf16" if bfloat16 else "fp32",
                                 None, None)
                 try:
-                    simulator = Simulator(module_a, [identity] * batch, the_device,
+                    resolution = config.uv_resolution or identity.raster.resolution
+                    if resolution not in remade:  # once per resolution, not per batch and dtype
+                        remade[resolution] = identity.at_resolution(resolution)
+                    simulator = Simulator(module_a, [remade[resolution]] * batch, the_device,
                                           body_faces=rig.faces if contact else None,
                                           config=replace(config, bfloat16=bfloat16))
 
