@@ -186,7 +186,7 @@ class BodyContact:
             index = torch.nonzero(moved).squeeze(1)
             if len(index) == 0:
                 break
-            # Each moved vertex is the margin away from the face it left: nothing farther matters.
+            # Any skin point bounds a search; the one each vertex was first pushed from is close by.
             again = proximity.query(garment[index], max_distance=_search_ranges(
                 garment[index], nearest.point[index], self.config.query_distance))
             inside = again.found & (again.signed_distance < 0)
