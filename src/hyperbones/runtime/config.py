@@ -56,11 +56,6 @@ class RuntimeConfig:
     round_query_distance: float = 0.04
     """The same after a projection round, which moves vertices by millimetres (a nearer bound lets
     the BVH skip the far cloth)."""
-    round_search_gap: float = 0.04
-    """After a projection round, a vertex that is certainly farther than this from the skin (its
-    last distance less how far it has moved since) is not searched again and keeps its skin point;
-    at ``round_query_distance`` or more every possibly-near vertex is searched (the exact answer).
-    Push-outs are exact either way: only vertices that may be within the margin need them."""
     push_rounds: int = 4
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
     inside the next one."""
@@ -77,9 +72,6 @@ class RuntimeConfig:
     this) is on the far side of a limb from them."""
     projection_iterations: int = 5
     """Local/global projective-dynamics steps per contact round (0: push-out only, no projection)."""
-    projection_chebyshev: float = 0.0
-    """ρ of the Chebyshev acceleration of the projection's iterations (0: plain; about the plain
-    iteration's convergence rate: each iteration then does the work of about two)."""
     projection_anchor: float = 0.02
     """How strongly each vertex keeps to its input position in the projection, against an edge's
     weight of 1 (a weak anchor lets the garment wander frame after frame)."""
@@ -111,9 +103,6 @@ class RuntimeConfig:
                      "projection_anchor"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
-        if self.round_search_gap < self.contact_margin:
-            raise ParameterError(f"runtime round_search_gap={self.round_search_gap!r} must be at least the "
-                                 f"contact_margin ({self.contact_margin!r}): nearer vertices may need a push-out")
         if self.uv_resolution != 0 and not 8 <= self.uv_resolution <= MAX_UV_RESOLUTION:
             raise ParameterError(f"runtime uv_resolution={self.uv_resolution!r} must be 0 (the model's) or in "
                                  f"[8, {MAX_UV_RESOLUTION}]")
@@ -122,8 +111,6 @@ class RuntimeConfig:
         for name, most in (("contact_rounds", MAX_ROUNDS), ("projection_iterations", MAX_ITERATIONS)):
             if not 0 <= getattr(self, name) <= most:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be in [0, {most}]")
-        if not 0.0 <= self.projection_chebyshev < 1.0:
-            raise ParameterError(f"runtime projection_chebyshev={self.projection_chebyshev!r} must be in [0, 1)")
         if self.projection_stretch < 0:
             raise ParameterError(f"runtime projection_stretch={self.projection_stretch!r} must be >= 0")
         if not -1.0 <= self.untangle_cosine <= 1.0:

@@ -39,14 +39,11 @@ class EdgeProjection:
     def __init__(self, rest_vertices: torch.Tensor, faces: torch.Tensor,
                  iterations: int = RuntimeConfig.projection_iterations, anchor: float = RuntimeConfig.projection_anchor,
                  stretch: float = RuntimeConfig.projection_stretch,
-                 compression: float = RuntimeConfig.projection_compression,
-                 chebyshev: float = RuntimeConfig.projection_chebyshev, solver: str = "auto",
+                 compression: float = RuntimeConfig.projection_compression, solver: str = "auto",
                  device: str | torch.device = "cpu"):
         """iterations: local/global steps per ``project``; anchor: α; stretch, compression: the
         band of edge lengths left alone, as fractions of the rest length (0, 0: every edge is
         pulled to its rest length; the teacher's limiter uses ``physics.strain_limit``'s band).
-        chebyshev: ρ of the Chebyshev semi-iterative acceleration (0: plain iterations; see
-        ``chebyshev_weights``).
         solver: "sparse" (scipy's LU, minimum-degree ordering, single precision: the fastest
         measured on a CPU; positions on any device are solved on the CPU), "dense" (the inverse
         in torch on ``device``: no host round trip, for GPUs) or "auto" (dense on CUDA)."""
@@ -76,7 +73,6 @@ class EdgeProjection:
         lengths = rest.edge_lengths.numpy().astype(np.float32)
         self.low, self.high = lengths * (1.0 - compression), lengths * (1.0 + stretch)
         self.anchor, self.iterations = anchor, iterations
-        self.weights = chebyshev_weights(iterations, chebyshev)
         self.device = torch.device(device)
         if solver == "auto":
             solver = "dense" if self.device.type == "cuda" else "sparse"
@@ -85,7 +81,7 @@ class EdgeProjection:
             self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
                                                   options={"SymmetricMode": True}).solve
         else:
-            self.inverse = _dense_inverse(system, edges, self.device)  # (V,V)
+            self.inverse = _dense_inverse(system, edges, anchor, self.device)  # (V,V)
             self.difference_t = _sparse_csr(self.difference, self.device)  # (E,V)
             self.gather_t = _sparse_csr(self.gather, self.device)  # (V,E)
             self.low_t = torch.from_numpy(self.low).to(self.device)
@@ -108,17 +104,13 @@ class EdgeProjection:
             planes = (contact.vertex.numpy(), (contact.point.double() - centre).float().numpy(),
                       contact.normal.float().numpy())
         target = self.anchor * x
-        previous = x
-        for omega in self.weights:
+        for _ in range(self.iterations):
             along = self.difference @ x
             length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
             wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
-            solved = self.solve(self.gather @ wanted + target)
-            if omega != 1.0:  # Chebyshev: over-step from the iterate before last
-                solved = omega * (solved - previous) + previous
+            x = self.solve(self.gather @ wanted + target)
             if planes is not None:
-                solved = _onto_planes(solved, *planes)
-            previous, x = x, solved
+                x = _onto_planes(x, *planes)
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)
 
     def _project_dense(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
@@ -131,42 +123,25 @@ class EdgeProjection:
             contact = contact.to(self.device)
             contact = ContactPlanes(contact.vertex, (contact.point.double() - centre).float(), contact.normal.float())
         target = self.anchor * x
-        previous = x
-        for omega in self.weights:
+        for _ in range(self.iterations):
             along = self.difference_t @ x
             length = along.norm(dim=1).clamp_min(1e-12)
             wanted = along * (torch.minimum(torch.maximum(length, self.low_t), self.high_t) / length)[:, None]
-            solved = self.inverse @ (self.gather_t @ wanted + target)
-            if omega != 1.0:
-                solved = omega * (solved - previous) + previous
+            x = self.inverse @ (self.gather_t @ wanted + target)
             if contact is not None:
-                solved = contact.project(solved)
-            previous, x = x, solved
+                x = contact.project(x)
         return (x.double() + centre).to(device=positions.device, dtype=dtype)
 
 
 SOLVERS = ("auto", "sparse", "dense")
 
-
-def chebyshev_weights(iterations: int, rho: float) -> list[float]:
-    """ω_k of Chebyshev semi-iterative acceleration (Wang 2015, "A Chebyshev Semi-Iterative
-    Approach for Accelerating Projective and Position-based Dynamics"): iterate k becomes
-    ω_k (x̂_k − x_{k−2}) + x_{k−2}, x̂_k the plain local/global step, with ω_1 = 1,
-    ω_2 = 2/(2−ρ²), ω_k = 4/(4−ρ² ω_{k−1}); ρ: the plain iteration's convergence rate
-    (0: every ω is 1, plain iterations)."""
-    if not 0.0 <= rho < 1.0:
-        raise ParameterError(f"the projection's Chebyshev rho must be in [0, 1), got {rho}")
-    weights: list[float] = []
-    for k in range(iterations):
-        weights.append(1.0 if k == 0 else 2.0 / (2.0 - rho * rho) if k == 1 else 4.0 / (4.0 - rho * rho * weights[-1]))
-    return weights
 _INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology
 
 
-def _dense_inverse(system, edges: np.ndarray, device: torch.device) -> torch.Tensor:
-    """The (V,V) float32 inverse of the sparse SPD ``system`` on ``device`` (Cholesky in
-    double precision there), cached by topology and anchor."""
-    key = (str(device), edges.tobytes(), float(system.diagonal().min()), system.shape[0])
+def _dense_inverse(system, edges: np.ndarray, anchor: float, device: torch.device) -> torch.Tensor:
+    """The (V,V) float32 inverse of the sparse SPD ``system`` (DᵀD + anchor·I of the (E,2)
+    ``edges``) on ``device`` (Cholesky in double precision there), cached by topology and anchor."""
+    key = (str(device), edges.tobytes(), float(anchor), system.shape[0])
     if key not in _INVERSES:
         dense = torch.from_numpy(system.toarray()).to(device=device, dtype=torch.float64)
         _INVERSES[key] = torch.cholesky_inverse(torch.linalg.cholesky(dense)).float()

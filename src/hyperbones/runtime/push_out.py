@@ -52,11 +52,15 @@ class BodyContact:
         # Per character, the last call's last query (``Nearest`` of each garment vertex; its
         # points lie on that call's body).
         self.last_nearest: list = [None] * characters
+        # Per character, those skin points where the current frame's body has them (V,3; NaN
+        # where none was found), made once a frame by ``skin_now`` for the follow and the search.
+        self._skin_now: list = [None] * characters
         self.clock = NO_CLOCK  # ``Simulator.profile`` sets a StageClock
 
     def forget(self) -> None:
         """Drop what the last call found (a new motion starts)."""
         self.last_nearest = [None] * len(self.proximities)
+        self._skin_now = [None] * len(self.proximities)
 
     def skin_motion(self, character: int, body: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor] | None:
         """How the skin under ``character``'s garment moved from the last call's body to ``body``
@@ -66,15 +70,26 @@ class BodyContact:
         nearest = self.last_nearest[character]
         if nearest is None:
             return None
+        now = self.skin_now(character, body)
+        return torch.nan_to_num(now - nearest.point, nan=0.0), nearest.signed_distance
+
+    def skin_now(self, character: int, body: torch.Tensor) -> torch.Tensor | None:
+        """(V,3) where the skin points of ``character``'s last call lie on ``body`` (Vb,3), this
+        frame's posed body (NaN where that call found none; None before a first call). Made
+        once a frame: the follow and this frame's first search both use them."""
         from hyperbones.geometry.surface import surface_points
 
-        now = surface_points(body, self.proximities[character].faces, nearest.face, nearest.barycentric)
-        return (now - nearest.point) * nearest.found[:, None], nearest.signed_distance
+        nearest = self.last_nearest[character]
+        if nearest is None:
+            return None
+        if self._skin_now[character] is None:
+            points = surface_points(body, self.proximities[character].faces, nearest.face, nearest.barycentric)
+            self._skin_now[character] = torch.where(nearest.found[:, None], points, torch.nan)
+        return self._skin_now[character]
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
         """N garments (V_i,3) and the N posed bodies (N,Vb,3) at the same frame -> the garments
         pushed out (and, with projections, ``contact_rounds`` times projected and pushed out)."""
-        from hyperbones.geometry.surface import surface_points
         from hyperbones.physics.contact_planes import ContactPlanes
 
         config = self.config
@@ -87,11 +102,8 @@ class BodyContact:
             clock = self.clock
             with clock.stage("contact queries"):
                 proximity.update(body)
-                last = self.last_nearest[index]
                 # Last frame's skin points, where the body is now: each bounds its vertex's search.
-                skin = None if last is None else torch.where(
-                    last.found[:, None], surface_points(body, proximity.faces, last.face, last.barycentric),
-                    torch.nan)
+                skin = self.skin_now(index, body)
                 queried_at = garment  # (V,3) where each row of ``nearest`` was searched from
                 garment, nearest = self._push_out(proximity, garment, config.query_distance, skin)
                 searched = config.query_distance  # how far every search looked
@@ -109,7 +121,7 @@ class BodyContact:
                     garment, nearest, queried_at = self._search_again(proximity, garment, nearest, queried_at,
                                                                       searched)
                     searched = config.round_query_distance
-            self.last_nearest[index] = nearest
+            self.last_nearest[index], self._skin_now[index] = nearest, None
             out.append(garment)
         return out
 
@@ -146,20 +158,19 @@ class BodyContact:
         was searched from).
 
         A vertex found outside at distance d that moved by s since is still outside, at least
-        d − s from the body. Where no face was within ``searched`` and ``searched`` − s exceeds
-        this search's range, it still has none (exact). Where d − s exceeds
-        ``config.round_search_gap`` (more than the margin), the vertex is certainly clear of the
-        body and keeps its record (skin point and distance as found then); only the planes of the
-        next round and the next frame's follow see that approximation, never the push-out.
+        d − s from the body; one with no face within ``searched`` is at least ``searched`` − s
+        away. Where that bound exceeds this search's range (``config.round_query_distance``) the
+        search would find nothing that matters: the vertex keeps its record, which beyond the
+        range no later step reads (the follow and the planes look nearer), so the output is
+        that of searching every vertex. (Skipping vertices nearer than the range, with a stale
+        face, was measured and rejected: docs/experiments/2026-11-28-realtime-runtime.md.)
         """
         config = self.config
         shift = (garment - queried_at).norm(dim=1)
         # Only a vertex found outside can be certified clear: one found inside stays inside
         # however far it is from the surface, and must be pushed out.
         clear = torch.where(nearest.found, nearest.signed_distance - shift, torch.full_like(shift, searched) - shift)
-        gap = torch.where(nearest.found, torch.full_like(shift, config.round_search_gap),
-                          torch.full_like(shift, config.round_query_distance))
-        search = (clear <= gap).nonzero().squeeze(1)
+        search = (clear <= config.round_query_distance).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        _skin_points(nearest)[search])
         # The rest keep their record as it was found from where it was searched (``queried_at``),

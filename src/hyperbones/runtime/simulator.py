@@ -184,7 +184,7 @@ class Simulator:
                         made[id(source)] = EdgeProjection(
                             identity.rest_vertices, identity.faces, config.projection_iterations,
                             config.projection_anchor, config.projection_stretch, config.projection_compression,
-                            config.projection_chebyshev, device=self.device)
+                            device=self.device)
                 projections = [made[id(source)] for source in identities]
             self.contact = BodyContact(body_faces, len(identities), self.device, projections=projections,
                                        config=config, search=search)
