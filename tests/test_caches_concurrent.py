@@ -127,14 +127,15 @@ def test_a_reader_racing_writers_never_sees_a_partial_entry(tmp_path, body, monk
     env = dict(os.environ, OMP_NUM_THREADS="1")
     writers = [subprocess.Popen([sys.executable, str(script), str(entry), "40"], env=env, stderr=subprocess.PIPE,
                                 text=True) for _ in range(2)]
-    reads, replaced = 0, set()
+    reads, seen = 0, set()
     while any(writer.poll() is None for writer in writers):
-        replaced.add(entry.stat().st_ino)
+        status = entry.stat()
+        seen.add((status.st_ino, status.st_mtime_ns))  # inode numbers alone are reused by the filesystem
         again, again_rest = draped_garment("tshirt", body, vertices=VERTICES)
         assert torch.equal(again.vertices, garment.vertices) and torch.equal(again_rest, rest)
         reads += 1
         time.sleep(0.002)
     for writer in writers:
         assert writer.wait() == 0, writer.stderr.read()[-3000:]
-    assert reads > 20 and len(replaced) > 5  # the reads did meet the entry being replaced
+    assert reads > 20 and len(seen) > 5  # the reads did meet the entry being replaced
     assert [p.name for p in entry.parent.iterdir()] == [entry.name]
