@@ -22,13 +22,16 @@ what no plane covered.
 
 from __future__ import annotations
 
-import torch
+from typing import TYPE_CHECKING
 
-from hyperbones.geometry.proximity import BodyProximity
+import torch
 
 from hyperbones.geometry.surface import Nearest, push_outside
 from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.physics.strain_limit import StrainLimiter
+
+if TYPE_CHECKING:  # Warp's search or its torch twin (``geometry.torch_proximity``): the same API
+    from hyperbones.geometry.proximity import BodyProximity
 
 # Limiter passes at most after the first, each with planes for the cloth the last one left inside.
 CONTACT_ROUNDS = 8

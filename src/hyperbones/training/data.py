@@ -32,19 +32,15 @@ from hyperbones.garment.draped import cache_dir
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
 from hyperbones.geometry.diffusion import diffuse, diffusion_steps
-from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.geometry.surface import surface_points
 from hyperbones.io_utils import atomic_path
-from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
-from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.energies import GRAVITY
 from hyperbones.physics.material import Material, sample_material
-from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.rig.garment_skinning import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
 from hyperbones.training.config import DataConfig
+from hyperbones.training.episode import Episode, Identity, ballistic_hops
 
 TEMPLATE_CACHE_VERSION = 3
 
@@ -126,83 +122,6 @@ def draped_vertices(garment: Garment, body: Body, resolution: int) -> torch.Tens
     with atomic_path(path) as tmp:
         torch.save(settled.vertices, tmp)
     return settled.vertices
-
-
-@dataclass
-class Identity:
-    """One garment on one body with one fabric: what the physics and the graph need.
-
-    rest: the cloth's rest state (float32); topology: the graph's fixed part;
-    skin_weights: (V,31) LBS weights of the canonical garment (pinned vertices follow them);
-    limiter: the strain limiting applied to each step's result (``physics.strain_limit``);
-    garment: the ``Garment`` itself on this body (what Module B encodes and rollouts start
-    from): at its rest shape, or settled on the body when ``draped``.
-    """
-
-    name: str
-    body: Body
-    rest: ClothRest
-    topology: GarmentTopology
-    skin_weights: torch.Tensor
-    limiter: StrainLimiter
-    garment: Garment | None = None  # the garment carried to this body (UVs, pins, fabric), when known
-    resolution: int | None = None  # the template resolution it was made from, when sampled by TeacherData
-    draped: bool = False  # garment is the carried garment settled on the body (data.drape)
-
-    @classmethod
-    def build(cls, name: str, body: Body, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor,
-              skin_weights: torch.Tensor, material: Material, garment: Garment | None = None,
-              resolution: int | None = None, draped: bool = False) -> "Identity":
-        rest = ClothRest.from_mesh(rest_vertices.float(), faces, material)
-        topology = GarmentTopology.build(rest.rest_vertices, faces, pinned, rest.vertex_masses, material)
-        return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask),
-                   garment, resolution, draped)
-
-    def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
-        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
-        return linear_blend_skinning(self.rest.rest_vertices, self.skin_weights, skinning_transforms)
-
-
-@dataclass
-class Episode:
-    """A window of frames s−1 … s+K of a motion on one identity.
-
-    body_vertices: (K+2,Vb,3); garment_lbs: (K+2,V,3) the garment skinned along (its
-    pinned rows are where pinned vertices must be). Step k goes from frame k+1 to k+2.
-    """
-
-    identity: Identity
-    body_vertices: torch.Tensor
-    garment_lbs: torch.Tensor
-    motion: str
-
-    @property
-    def num_steps(self) -> int:
-        return self.body_vertices.shape[0] - 2
-
-
-def ballistic_hops(num_frames: int, fps: float, rng: random.Random,
-                   speeds: tuple[float, float] = (0.8, 2.2)) -> torch.Tensor:
-    """(num_frames,) heights (m) of hops in free fall, to add to a clip's root.
-
-    Hops follow one another after random pauses (0.2–0.6 s; the first after 0–0.5 s): each
-    leaves the ground at a speed drawn from ``speeds`` and flies a parabola under gravity
-    back to height 0. The path is then smoothed by a 5-frame binomial kernel, which spreads
-    take-off and landing over ~0.15 s (2–3 g, as in the CMU jumps) and leaves the flight's
-    curvature at exactly −g.
-    """
-    heights = torch.zeros(num_frames + 4, dtype=torch.float64)  # 2 frames of padding each side
-    dt = 1.0 / fps
-    frame = 2 + int(rng.uniform(0.0, 0.5) * fps)
-    while frame < num_frames + 2:
-        speed = rng.uniform(*speeds)
-        flight = int(2 * speed / GRAVITY * fps)
-        tau = torch.arange(1, flight + 1, dtype=torch.float64) * dt
-        arc = (speed * tau - GRAVITY * tau ** 2 / 2).clamp_min(0.0)[: len(heights) - frame - 1]
-        heights[frame + 1: frame + 1 + len(arc)] = arc
-        frame += 1 + flight + int(rng.uniform(0.2, 0.6) * fps)
-    kernel = torch.tensor([1.0, 4.0, 6.0, 4.0, 1.0], dtype=torch.float64) / 16
-    return torch.nn.functional.conv1d(heights[None, None], kernel[None, None])[0, 0].float()
 
 
 class TeacherData:
