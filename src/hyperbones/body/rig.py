@@ -51,11 +51,17 @@ class BodyRig:
     def pose(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor) -> torch.Tensor:
         """(T,31,3,3) world rotations from the A-pose and (T,3) Hips positions -> (T,Vb,3)
         posed vertices (the same numbers as ``Body.pose``)."""
+        return self.posed(joint_rotations, root_translation)[0]
+
+    def posed(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor
+              ) -> tuple[torch.Tensor, torch.Tensor]:
+        """``pose``'s (T,Vb,3) vertices and the (T,31,4,4) skinning transforms that made them
+        (what a garment's LBS and virtual bones are posed with)."""
         rotations = joint_rotations.to(self.rest_vertices)
         roots = root_translation.to(self.rest_vertices)
         joints = forward_kinematics(self.rest_joint_positions, rotations, roots)
-        return linear_blend_skinning(self.rest_vertices, self.skin_weights,
-                                     skinning_transforms(self.rest_joint_positions, rotations, joints))
+        transforms = skinning_transforms(self.rest_joint_positions, rotations, joints)
+        return linear_blend_skinning(self.rest_vertices, self.skin_weights, transforms), transforms
 
     def save(self, path: str | Path) -> Path:
         """Write the rig atomically (plain tensors, loadable with ``weights_only``)."""

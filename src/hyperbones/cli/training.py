@@ -12,17 +12,12 @@ from hyperbones.errors import InputFileError, ParameterError
 def run_train(args) -> int:
     from hyperbones.training.config import HyperBonesTrainingConfig, apply_overrides, load_config
     from hyperbones.training.joint import JointTrainer
-    from hyperbones.training.trainer import TeacherTrainer
+    from hyperbones.training.trainer import TeacherTrainer, train_to_end
 
     config = apply_overrides(load_config(args.config), args.set)
     kind = JointTrainer if isinstance(config, HyperBonesTrainingConfig) else TeacherTrainer
     trainer = kind(config, args.out, resume=args.resume, progress=not args.quiet, max_steps=args.max_steps)
-    try:
-        step = trainer.train()
-    except BaseException:
-        trainer.close(finished=False)
-        raise
-    trainer.close()
+    step = train_to_end(trainer)
     if trainer.is_main:
         print(f"trained to step {step}; checkpoint {trainer.checkpoint_path.resolve()}, "
               f"TensorBoard logs {(trainer.run_dir / 'tensorboard').resolve()}")
@@ -55,6 +50,8 @@ def run_export(args) -> int:
 
     out = Path(args.out)
     summary = Path(args.summary) if args.summary else out.with_suffix(".md")
+    if args.share_teacher and not (out.parent / "teacher.pt").is_file():
+        raise ParameterError(f"--share-teacher: no teacher.pt beside {out} to read the teacher from")
     # The weights and their summary appear together or not at all (each folder's set is staged).
     with staged_outputs(out.parent) as staging:
         if summary.parent.resolve() == out.parent.resolve():
@@ -62,6 +59,11 @@ def run_export(args) -> int:
         else:
             with staged_outputs(summary.parent) as summary_staging:
                 export_weights(args.checkpoint, staging / out.name, summary=summary_staging / summary.name)
+        if args.share_teacher:
+            from hyperbones.models.loading import load_checkpoint, save_checkpoint, without_teacher
+
+            save_checkpoint(staging / out.name, without_teacher(load_checkpoint(staging / out.name),
+                                                                out.parent / "teacher.pt"))
     print(f"wrote {out.resolve()} and {summary.resolve()}")
     return 0
 
@@ -78,6 +80,10 @@ def add_export(sub) -> None:
     export.add_argument("--summary", default=None,
                         help="where to write the .md summary (default: beside --out; the shipped models' are in "
                              "docs/checkpoints/)")
+    export.add_argument("--share-teacher", action="store_true",
+                        help="a HyperBones model: store its teacher as read from the teacher.pt beside --out, "
+                             "which must hold the same weights bit for bit, not as a copy (how the shipped "
+                             "hyperbones.pt is saved; the two files then travel together)")
     export.set_defaults(func=run_export)
 
 
@@ -119,4 +125,38 @@ def add_rollouts(sub) -> None:
     rollouts.set_defaults(func=run_rollouts)
 
 
-VERBS = (add_train, add_export, add_rollouts)
+def run_pack(args) -> int:
+    from hyperbones.training.config import apply_overrides, load_config
+    from hyperbones.training.pack import QUICK_BODIES, QUICK_DATA, build_pack
+
+    config = apply_overrides(load_config(args.config), [*(QUICK_DATA if args.quick else ()), *(args.set or ())])
+    summary = build_pack(config, args.out, bodies=QUICK_BODIES if args.quick else args.bodies, seed=args.seed,
+                         progress=None if args.quiet else (lambda text: print(f"packing {text}", flush=True)))
+    print(f"wrote {Path(args.out).resolve()} ({summary['bytes'] / 2**20:.1f} MiB): {summary['bodies']} training "
+          f"bodies (PCA basis {summary['basis']}, largest rebuild error {summary['body_error_m'] * 1e3:.3f} mm), "
+          f"{summary['templates']} garments, {summary['motions']} motions ({summary['frames']} frames)")
+    return 0
+
+
+def add_pack(sub) -> None:
+    pack = sub.add_parser("pack", help="write a training pack: what training needs from Anny, Warp and the drape",
+                          description="Writes one file holding the config's training bodies (PCA-compressed), "
+                                      "garment templates with their skinning, carrying binding and (for a phase-2 "
+                                      "config) virtual bones, the retargeted training motions and the fabric "
+                                      "ranges, so `python -m hyperbones.training.from_pack` can train where only "
+                                      "torch is installed (a GPU machine). See the README, \"Training on a GPU\".")
+    pack.add_argument("--config", required=True, help="TOML training config (teacher or phase 2)")
+    pack.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
+                      help="override one config field, as for train (repeatable)")
+    options.add_out(pack, "pack file (.pt)")
+    pack.add_argument("--bodies", type=int, default=256,
+                      help="training body shapes to draw, away from the held-out bodies (default: 256)")
+    pack.add_argument("--seed", type=int, default=0, help="seed of the body draw (default: 0)")
+    pack.add_argument("--quick", action="store_true",
+                      help="a small pack for checks: 2 bodies, the tshirt at 1k vertices, one clip and the walk "
+                           "(train it with the pack trainer's --quick)")
+    options.add_quiet(pack)
+    pack.set_defaults(func=run_pack)
+
+
+VERBS = (add_train, add_export, add_rollouts, add_pack)

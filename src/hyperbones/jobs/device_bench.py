@@ -46,8 +46,6 @@ class DeviceRow:
 
 def prepare(out: str | Path, vertices: tuple[int, ...] = VERTICES, garment: str = GARMENT) -> list[Path]:
     """Write the benchmark's inputs into ``out`` (needs Anny and Warp); returns the files written."""
-    import importlib.util
-
     from hyperbones.body.anny_body import body_for
     from hyperbones.body.rig import BodyRig
     from hyperbones.body.shape import BodyShape
@@ -71,11 +69,19 @@ def prepare(out: str | Path, vertices: tuple[int, ...] = VERTICES, garment: str 
     roots = body.pose(motion.joint_rotations, motion.root_translation, with_vertices=False).joint_positions[:, 0]
     torch.save({"rotations": motion.joint_rotations.float(), "roots": roots.float()}, out / "walk.pt")
     written.append(out / "walk.pt")
-    roma = Path(importlib.util.find_spec("roma").submodule_search_locations[0])
-    shutil.copytree(roma, out / "site" / "roma", dirs_exist_ok=True,
-                    ignore=shutil.ignore_patterns("__pycache__"))
-    written.append(out / "site" / "roma")
+    written.append(copy_package("roma", out / "site"))
     return written
+
+
+def copy_package(name: str, site: str | Path) -> Path:
+    """Copy the installed pure-Python package ``name`` into folder ``site`` (put on PYTHONPATH
+    there), for a machine that lacks it (roma, on the GPU machines); returns its copy."""
+    import importlib.util
+
+    copy = Path(site) / name
+    shutil.copytree(importlib.util.find_spec(name).submodule_search_locations[0], copy, dirs_exist_ok=True,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    return copy
 
 
 def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: int = 30,

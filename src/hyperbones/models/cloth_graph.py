@@ -33,7 +33,7 @@ import torch
 from hyperbones.geometry.surface import Nearest
 from hyperbones.models.mgn import EdgeSet
 from hyperbones.physics.energies import GRAVITY, bending_energy, stretching_energy
-from hyperbones.physics.material import Material, material_features
+from hyperbones.physics.material import BatchMaterial, Material, material_features
 
 NODE_FEATURES = 21
 EDGE_FEATURES = 8
@@ -50,7 +50,7 @@ class GarmentTopology:
 
     rest_vertices: (V,3) rest shape; faces: (F,3); pinned_mask: (V,) bool;
     masses: (V,) kg; mesh_senders/mesh_receivers: (2U,) both directions of every edge;
-    material: the cloth.
+    material: the cloth (a ``BatchMaterial`` for several garments in one, ``training.episode_batch``).
     """
 
     rest_vertices: torch.Tensor
@@ -59,7 +59,7 @@ class GarmentTopology:
     masses: torch.Tensor
     mesh_senders: torch.Tensor
     mesh_receivers: torch.Tensor
-    material: Material
+    material: Material | BatchMaterial
 
     @classmethod
     def build(cls, rest_vertices: torch.Tensor, faces: torch.Tensor, pinned: torch.Tensor, masses: torch.Tensor,
@@ -77,9 +77,10 @@ class GarmentTopology:
         return self.rest_vertices.shape[0]
 
     def to(self, device: torch.device | str) -> "GarmentTopology":
+        material = self.material.to(device) if isinstance(self.material, BatchMaterial) else self.material
         return GarmentTopology(self.rest_vertices.to(device), self.faces.to(device), self.pinned_mask.to(device),
                                self.masses.to(device), self.mesh_senders.to(device), self.mesh_receivers.to(device),
-                               self.material)
+                               material)
 
 
 def vertex_normals(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -115,6 +116,11 @@ def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: 
                 world_radius: float = WORLD_RADIUS) -> ClothGraph:
     """The graph of one step t -> t+1.
 
+    Several garments, each on its own body, make one graph as one garment on one body
+    (``training.episode_batch``): their meshes concatenated, with a ``BatchMaterial``, and
+    their B bodies laid one after another in body_now, body_next (B·Vb,3) and body_faces
+    (B·Fb,3, indices offset); every node then reads its own garment's fabric.
+
     Args:
         topology: the garment's fixed part.
         positions: (V,3) garment at t; velocities: (V,3) per-frame displacement x(t) − x(t−1).
@@ -139,7 +145,10 @@ def build_graph(topology: GarmentTopology, positions: torch.Tensor, velocities: 
     kind[topology.pinned_mask] = PINNED
     num_body = len(used)
     kinds = torch.nn.functional.one_hot(torch.cat([kind, torch.full((num_body,), BODY, device=device)]), 3).float()
-    material = torch.tensor(material_features(topology.material), device=device).expand(num_garment + num_body, 4)
+    if isinstance(topology.material, BatchMaterial):
+        material = topology.material.node_features(used, body_now.shape[0]).to(device)
+    else:
+        material = torch.tensor(material_features(topology.material), device=device).expand(num_garment + num_body, 4)
     masses = torch.cat([topology.masses, torch.zeros(num_body, device=device)])[:, None] * MASS_SCALE
     step = torch.full((num_garment + num_body, 1), dt / FRAME_DT, device=device)
     node_features = torch.cat([

@@ -1,8 +1,15 @@
 """Loading trained models: checkpoints written atomically and read without executing pickled
-code, the shipped teacher and HyperBones model, and the models built from them."""
+code, the shipped teacher and HyperBones model, and the models built from them.
+
+A HyperBones checkpoint may leave its teacher (Module C) out and record that it is read from
+a teacher checkpoint beside it (``TEACHER_FROM``): the shipped ``hyperbones.pt`` does, since
+its teacher is the shipped ``teacher.pt`` bit for bit. ``load_checkpoint`` puts it back, so
+every reader sees the whole model; ``without_teacher`` makes such a payload.
+"""
 
 from __future__ import annotations
 
+import hashlib
 import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, get_args, get_origin, get_type_hints
@@ -22,6 +29,11 @@ SHIPPED_TEACHER = Path(__file__).resolve().parent.parent / "checkpoints" / "teac
 SHIPPED_HYPERBONES = SHIPPED_TEACHER.with_name("hyperbones.pt")
 """The shipped HyperBones model (``--method hyperbones`` and ``Simulator.load`` default to it)."""
 
+TEACHER_FROM = "teacher_from"
+"""A HyperBones checkpoint's record that its teacher is not stored in it but read from a teacher
+checkpoint in the same folder: ``{"file": name, "sha256": state_digest of the teacher's weights}``
+(the digest, so a teacher file replaced since is refused rather than silently used)."""
+
 MAX_MODEL_SIZE = 4096
 """Largest size a checkpoint's model config may state (a width, a block or bone count, a UV
 resolution): larger ones are damage, and would build an enormous model before any check."""
@@ -34,8 +46,11 @@ def save_checkpoint(path: str | Path, payload: dict[str, Any]) -> Path:
     return path
 
 
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Load a checkpoint without executing pickled code; one-line errors name the file."""
+def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu",
+                    teacher_beside: bool = True) -> dict[str, Any]:
+    """Load a checkpoint without executing pickled code; one-line errors name the file. A teacher
+    recorded as read from a file beside it (``TEACHER_FROM``) is put back, the record dropped;
+    ``teacher_beside`` False refuses such a checkpoint (the teacher file of one)."""
     path = Path(path)
     if not path.exists():
         raise InputFileError(path, "checkpoint not found")
@@ -47,9 +62,73 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
     if not isinstance(payload, dict) or "model" not in payload or "config" not in payload:
         raise InputFileError(path, "not a hyperbones checkpoint (no model state or config)")
     _check_contents(path, payload)
+    if TEACHER_FROM in payload:
+        if not teacher_beside:
+            raise InputFileError(path, "not a teacher checkpoint (it reads its own teacher from another file)")
+        _put_teacher_back(path, payload, map_location)
     if payload.get("ema"):
         payload["ema"] = {**payload["model"], **payload["ema"]}  # entries left out equal the model's
     return payload
+
+
+def state_digest(state: dict[str, torch.Tensor]) -> str:
+    """The SHA-256 of a state dict's names, dtypes, shapes and bytes: equal digests, bit-identical weights."""
+    digest = hashlib.sha256()
+    for name in sorted(state):
+        value = state[name].detach().cpu().contiguous()
+        digest.update(f"{name}:{value.dtype}:{tuple(value.shape)};".encode())
+        digest.update(value.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def _put_teacher_back(path: Path, payload: dict, map_location: str | torch.device) -> None:
+    """Fill in the teacher of a checkpoint saved by ``without_teacher`` from the file it names,
+    which must still hold the weights it was saved with."""
+    record = payload.pop(TEACHER_FROM)
+    name = record.get("file") if isinstance(record, dict) else None
+    if not (isinstance(name, str) and name not in ("", ".", "..") and Path(name).name == name
+            and isinstance(record.get("sha256"), str)):
+        raise InputFileError(path, f"its {TEACHER_FROM} record is not a file name beside it and a digest")
+    if "runtime" not in payload["config"]:
+        raise InputFileError(path, f"a teacher checkpoint with a {TEACHER_FROM} record (only a HyperBones one has)")
+    source = path.with_name(name)
+    if not source.is_file() or source.resolve() == path.resolve():
+        raise InputFileError(path, f"its teacher is read from {name} beside it, which is missing")
+    teacher = load_checkpoint(source, map_location, teacher_beside=False)
+    if "runtime" in teacher["config"]:
+        raise InputFileError(path, f"its teacher is read from {name} beside it, which is not a teacher checkpoint")
+    state = teacher_state(teacher)
+    if state_digest(state) != record["sha256"]:
+        raise InputFileError(path, f"its teacher is read from {name} beside it, which holds other weights "
+                                   f"than it was saved with (replaced since?)")
+    payload["model"] = {**{f"teacher.{key}": value for key, value in state.items()}, **payload["model"]}
+
+
+def without_teacher(payload: dict, teacher_path: str | Path) -> dict:
+    """A loaded HyperBones checkpoint's ``payload`` with its teacher left out and recorded as read
+    from ``teacher_path``, which must hold the same teacher bit for bit (model, and moving
+    average where kept) and lie in the folder the result is saved to (``TEACHER_FROM``)."""
+    teacher_path = Path(teacher_path)
+    if "runtime" not in payload["config"]:
+        raise ParameterError("a teacher checkpoint has no teacher to leave out (a HyperBones one has)")
+    state = teacher_state(load_checkpoint(teacher_path, teacher_beside=False))
+    ours = {f"teacher.{key}": value for key, value in state.items()}
+    for part in ("model", "ema"):
+        if not payload.get(part):  # no moving average kept
+            continue
+        kept = {name: value for name, value in payload[part].items() if name.startswith("teacher.")}
+        differ = sorted(set(kept) ^ set(ours)) or [name for name in sorted(ours) if kept[name].dtype != ours[name].dtype
+                                                   or not torch.equal(kept[name], ours[name])]
+        if differ:
+            raise InputFileError(teacher_path, f"not the teacher of this model: {len(differ)} weight(s) of its "
+                                               f"{part} state differ (e.g. {differ[0]})")
+    model = {name: value for name, value in payload["model"].items() if not name.startswith("teacher.")}
+    slim = {**payload, "model": model}
+    if payload.get("ema"):  # only the entries that differ from the model's, as training saves it
+        slim["ema"] = {name: value for name, value in payload["ema"].items() if not name.startswith("teacher.")
+                       and not (name in model and torch.equal(value, model[name]))}
+    slim[TEACHER_FROM] = {"file": teacher_path.name, "sha256": state_digest(state)}
+    return slim
 
 
 def _check_contents(path: Path, payload: dict) -> None:

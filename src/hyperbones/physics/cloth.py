@@ -12,7 +12,7 @@ from dataclasses import dataclass, fields, replace
 import torch
 
 from hyperbones.errors import ParameterError
-from hyperbones.physics.material import Material
+from hyperbones.physics.material import BatchMaterial, Material
 
 
 def triangle_areas(vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
@@ -115,7 +115,8 @@ class ClothRest:
     edges: (U,2) all unique undirected edges, edge_lengths: (U,) rest lengths (3D template).
     num_nonmanifold_edges: edges shared by more than two faces (or by a duplicated face),
     left out of bending. num_boundary_edges, num_degenerate_faces: for reports.
-    material: the cloth parameters the energies use.
+    material: the cloth parameters the energies use (per element for several garments
+    concatenated into one mesh: a ``BatchMaterial``, ``training.episode_batch``).
     """
 
     rest_vertices: torch.Tensor
@@ -129,7 +130,7 @@ class ClothRest:
     hinge_rest_angles: torch.Tensor
     edges: torch.Tensor
     edge_lengths: torch.Tensor
-    material: Material
+    material: Material | BatchMaterial
     num_nonmanifold_edges: int = 0
     num_boundary_edges: int = 0
     num_degenerate_faces: int = 0
@@ -219,6 +220,8 @@ class ClothRest:
                     changes[f.name] = value.to(*args, **kwargs)
                 else:
                     changes[f.name] = value.to(device=device)
+        if isinstance(self.material, BatchMaterial):
+            changes["material"] = self.material.to(*args, **kwargs)
         return replace(self, **changes)
 
     @property

@@ -2,7 +2,9 @@
 
 Every function takes garment positions with any leading batch shape, ``(...,V,3)`` in metres,
 and returns energies in joules with that batch shape ``(...)``. Rest quantities come from a
-``ClothRest`` (``hyperbones.physics.cloth``). Gravity acts along −Z.
+``ClothRest`` (``hyperbones.physics.cloth``). Its material may hold per-face and per-hinge
+tensors instead of floats (a ``BatchMaterial``: several garments in one mesh), so material
+parameters must only ever multiply per-element terms. Gravity acts along −Z.
 """
 
 from __future__ import annotations

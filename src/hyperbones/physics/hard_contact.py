@@ -40,14 +40,18 @@ QUERY_DISTANCE = 0.1  # m: the teacher's steps look for nearest body faces this 
 
 def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: StrainLimiter, proximity: BodyProximity,
                    nearest_before: Nearest, body_after: torch.Tensor, movable: torch.Tensor, margin: float,
-                   query_distance: float, rounds: int = CONTACT_ROUNDS) -> tuple[torch.Tensor, torch.Tensor]:
+                   query_distance: float, rounds: int = CONTACT_ROUNDS,
+                   vertex_garment: torch.Tensor | None = None) -> tuple[torch.Tensor, torch.Tensor]:
     """Strain limiting and hard contact after a step; every move is kept as velocity.
 
     positions, velocities: (V,3) the step's raw result (per-step displacement);
     limiter: the garment's strain limiting; proximity: the body's BVH (moved to ``body_after`` (Vb,3)
     here, where it stays for the next step); nearest_before: ``proximity.query`` of the
     positions before the step on the body before it; movable: (V,) bool (not pinned);
-    rounds: limiter passes after the first, each adding planes for cloth left inside.
+    rounds: limiter passes after the first, each adding planes for cloth left inside;
+    vertex_garment: (V,) int64 the garment of each vertex when the positions are several
+    garments in one (``training.episode_batch``): each garment then stops its rounds where
+    it would alone, rather than take more limiter passes while another still has cloth inside.
     Returns positions, velocities, both (V,3).
     """
     proximity.update(body_after)
@@ -64,10 +68,20 @@ def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: S
             break
         planes = planes + ContactPlanes.nearest(after, left_inside, margin)
         held |= left_inside
-        limited = limiter.project(limited, planes)
+        projected = limiter.project(limited, planes)
+        if vertex_garment is not None:  # garments are not linked: a garment that left none inside keeps its place
+            projected = torch.where(_anywhere_in_garment(left_inside, vertex_garment)[:, None], projected, limited)
+        limited = projected
         after = proximity.query(limited, max_distance=query_distance)
     final = push_outside(limited, after, margin, movable=movable & (after.signed_distance < 0))
     return final, velocities + (final - positions)
+
+
+def _anywhere_in_garment(mask: torch.Tensor, vertex_garment: torch.Tensor) -> torch.Tensor:
+    """(V,) bool, (V,) garment ids -> (V,) bool: ``mask`` holds somewhere in the vertex's garment."""
+    hit = torch.zeros_like(mask)  # one slot per garment id (ids < V: every garment has a vertex)
+    hit[vertex_garment[mask]] = True
+    return hit[vertex_garment]
 
 
 __all__ = ["constrain_step", "CONTACT_ROUNDS", "QUERY_DISTANCE"]

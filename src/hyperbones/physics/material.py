@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, fields
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, fields, replace
+
+import torch
 
 from hyperbones.errors import ParameterError
 
@@ -73,6 +76,60 @@ def material_features(material: Material) -> list[float]:
             value, low, high = math.log(value), math.log(low), math.log(high)
         out.append((value - low) / (high - low))
     return out
+
+
+@dataclass
+class BatchMaterial:
+    """The fabrics of several garments concatenated into one mesh (``training.episode_batch``),
+    per element: tensors that broadcast where ``Material``'s floats do, so the energies
+    (``physics.energies``) read a batch's ``ClothRest.material`` unchanged.
+
+    lame_mu, lame_lambda, thickness: (F,) per face, Pa, Pa, m; bending: (H,) per hinge;
+    density: (V,) per vertex, kg/m² (``ClothRest.with_material`` rescales masses by it);
+    features: (B,4) ``material_features`` of each garment's fabric, float32 (the graph's);
+    vertex_garment: (V,) int64 the garment each vertex belongs to, 0 … B−1 in mesh order;
+    materials: the B fabrics themselves.
+    """
+
+    lame_mu: torch.Tensor
+    lame_lambda: torch.Tensor
+    thickness: torch.Tensor
+    density: torch.Tensor
+    bending: torch.Tensor
+    features: torch.Tensor
+    vertex_garment: torch.Tensor
+    materials: tuple[Material, ...]
+
+    @classmethod
+    def concatenate(cls, materials: Sequence[Material], face_counts: Sequence[int], hinge_counts: Sequence[int],
+                    vertex_counts: Sequence[int], dtype: torch.dtype = torch.float32,
+                    device: torch.device | str | None = None) -> "BatchMaterial":
+        """Garment b's fabric ``materials[b]`` on its ``face_counts[b]`` faces, ``hinge_counts[b]``
+        hinges and ``vertex_counts[b]`` vertices, the garments one after another."""
+        def per(counts: Sequence[int], name: str) -> torch.Tensor:
+            values = torch.tensor([getattr(m, name) for m in materials], dtype=torch.float64)
+            return values.repeat_interleave(torch.tensor(list(counts))).to(dtype=dtype, device=device)
+
+        garments = torch.arange(len(materials), device=device)
+        return cls(per(face_counts, "lame_mu"), per(face_counts, "lame_lambda"), per(face_counts, "thickness"),
+                   per(vertex_counts, "density"), per(hinge_counts, "bending"),
+                   torch.tensor([material_features(m) for m in materials], device=device),
+                   garments.repeat_interleave(torch.tensor(list(vertex_counts), device=device)), tuple(materials))
+
+    def node_features(self, body_nodes: torch.Tensor, num_body_vertices: int) -> torch.Tensor:
+        """(V+M,4) the graph's material features: each garment vertex's own fabric's, then for
+        each of the M ``body_nodes`` (flat vertex ids of the B bodies laid one after another,
+        ``num_body_vertices`` in all) the fabric of the garment on that body."""
+        per_body = num_body_vertices // self.features.shape[0]
+        garment = torch.cat([self.vertex_garment, body_nodes.to(self.vertex_garment) // per_body])
+        return self.features[garment]
+
+    def to(self, *args, **kwargs) -> "BatchMaterial":
+        """Move/cast the per-element tensors like ``Tensor.to`` (features stay float32, indices int64)."""
+        device = self.lame_mu.to(*args, **kwargs).device
+        return replace(self, **{name: getattr(self, name).to(*args, **kwargs)
+                                for name in ("lame_mu", "lame_lambda", "thickness", "density", "bending")},
+                       features=self.features.to(device), vertex_garment=self.vertex_garment.to(device))
 
 
 def sample_material(uniform) -> Material:

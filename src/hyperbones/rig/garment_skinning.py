@@ -16,7 +16,6 @@ from hyperbones.body.anny_body import Body, PosedBody
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.diffusion import diffuse, diffusion_steps
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.proximity import BodyProximity
 
 SMOOTHING_LENGTH = 0.15  # metres the weights are diffused over
 FREE_DISTANCE = 0.05  # cloth this far from the skin (or more) diffuses fully
@@ -26,6 +25,8 @@ TEAR_BAND = 0.05  # m: cloth this close (along the garment) to a tear line diffu
 
 def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float = SMOOTHING_LENGTH) -> torch.Tensor:
     """(V,31) skinning weights of the canonical garment (rows sum to 1)."""
+    from hyperbones.geometry.proximity import BodyProximity  # Warp, here only: its constants travel without it
+
     proximity = BodyProximity(body.faces)
     proximity.update(body.rest_vertices)
     nearest = proximity.query(garment.vertices, max_distance=1.0)

@@ -79,19 +79,9 @@ class VirtualBones:
         proximity.update(body.rest_vertices.cpu())
         anchors = vertices if rest_vertices is None else rest_vertices.detach().to("cpu", torch.float32)
         nearest = proximity.query(anchors[picked], max_distance=10.0)
-        corners = body.faces.cpu()[nearest.face]  # (B,3)
-        joint_weights = (nearest.barycentric[..., None] * body.skin_weights.cpu()[corners]).sum(1)
-        joint_weights = joint_weights / joint_weights.sum(1, keepdim=True)
-
+        joint_weights = bone_joint_weights(nearest, body.faces.cpu(), body.skin_weights.cpu())
         distance = geodesic_distances(vertices, garment.faces.cpu(), picked).T  # (V,B)
-        # A vertex on a piece without any bone (a small separate patch) falls back on
-        # straight-line distances rather than getting no weights at all.
-        unreached = torch.isinf(distance).all(1)
-        if unreached.any():
-            distance[unreached] = torch.cdist(vertices[unreached], vertices[picked])
-        logits = -distance / sigma
-        log_weights = logits - torch.logsumexp(logits, dim=1, keepdim=True)
-        return cls(vertices[picked].clone(), picked, joint_weights, log_weights)
+        return cls(vertices[picked].clone(), picked, joint_weights, initial_log_weights(distance, vertices, picked, sigma))
 
     @property
     def num_bones(self) -> int:
@@ -114,6 +104,30 @@ class VirtualBones:
             rotations_b (x − rest_positions_b) + positions_b.
         """
         return pose_bones(self.joint_weights, self.rest_positions, skinning_transforms)
+
+
+def bone_joint_weights(nearest, body_faces: torch.Tensor, body_skin_weights: torch.Tensor) -> torch.Tensor:
+    """(B,J) skinning weights of each bone from ``nearest`` (a ``Nearest`` of B bone anchors
+    on the canonical body), interpolated over the face's corners; rows sum to 1."""
+    corners = body_faces[nearest.face.clamp_min(0)]  # (B,3)
+    weights = (nearest.barycentric[..., None] * body_skin_weights[corners]).sum(1)
+    return weights / weights.sum(1, keepdim=True)
+
+
+def initial_log_weights(distance: torch.Tensor, vertices: torch.Tensor, picked: torch.Tensor,
+                        sigma: float = SIGMA) -> torch.Tensor:
+    """(V,B) log W0 = log softmax(−d/σ) from ``distance`` (V,B) geodesic distances to the
+    bones (inf: not on the same piece); ``vertices`` (V,3), ``picked`` (B,) the bones' vertices.
+
+    A vertex on a piece without any bone (a small separate patch) falls back on straight-line
+    distances rather than getting no weights at all.
+    """
+    distance = distance.float().clone()
+    unreached = torch.isinf(distance).all(1)
+    if unreached.any():
+        distance[unreached] = torch.cdist(vertices[unreached], vertices[picked])
+    logits = -distance / sigma
+    return logits - torch.logsumexp(logits, dim=1, keepdim=True)
 
 
 def pose_bones(joint_weights: torch.Tensor, rest_positions: torch.Tensor,

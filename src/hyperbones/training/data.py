@@ -31,54 +31,16 @@ from hyperbones.garment.draped import CACHE_VERSION as DRAPE_CACHE_VERSION
 from hyperbones.garment.draped import cache_dir
 from hyperbones.garment.garment import Garment
 from hyperbones.garment.templates import make_template
-from hyperbones.geometry.diffusion import diffuse, diffusion_steps
-from hyperbones.geometry.proximity import BodyProximity
-from hyperbones.geometry.surface import surface_points
 from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
-from hyperbones.physics.material import Material, sample_material
-from hyperbones.rig.garment_skinning import FREE_DISTANCE, SMOOTHING_LENGTH, garment_skin_weights
+from hyperbones.physics.material import Material
+from hyperbones.rig.garment_skinning import garment_skin_weights
 from hyperbones.training.config import DataConfig
-from hyperbones.training.episode import Episode, Identity, ballistic_hops
+from hyperbones.training.episode import Episode, EpisodeDraws, Identity, ballistic_hops
+from hyperbones.training.shape_follower import ShapeFollower
 
 TEMPLATE_CACHE_VERSION = 3
-
-
-@dataclass
-class ShapeFollower:
-    """Carries a garment made on one body to another body shape (same mesh topology).
-
-    Each garment vertex moves by the displacement of its nearest skin point between the
-    two bodies; that displacement field is then smoothed over the garment where the cloth
-    hangs away from the skin, so a skirt between the legs moves with both legs instead of
-    tearing (the same rule as the LBS weights). A plain nearest-point transfer folds such
-    cloth where its nearest point jumps from one leg to the other.
-    """
-
-    vertices: torch.Tensor  # (V,3) the garment on the source body
-    face: torch.Tensor  # (V,) nearest source face
-    barycentric: torch.Tensor  # (V,3)
-    source_points: torch.Tensor  # (V,3) nearest source skin points
-    edges: torch.Tensor  # (E,2)
-    rate: torch.Tensor  # (V,1) diffusion rate
-    steps: int
-
-    @classmethod
-    def bind(cls, garment: Garment, body: Body) -> "ShapeFollower":
-        proximity = BodyProximity(body.faces)
-        proximity.update(body.rest_vertices)
-        nearest = proximity.query(garment.vertices, max_distance=1.0)
-        edges = garment.edges()
-        edge_length = float((garment.vertices[edges[:, 0]] - garment.vertices[edges[:, 1]]).norm(dim=-1).mean())
-        rate = 0.5 * (nearest.signed_distance.abs() / FREE_DISTANCE).clamp(0, 1)[:, None]
-        return cls(garment.vertices, nearest.face.clamp_min(0), nearest.barycentric, nearest.point, edges, rate,
-                   diffusion_steps(SMOOTHING_LENGTH, edge_length))
-
-    def place(self, body: Body) -> torch.Tensor:
-        """(V,3) the garment carried onto ``body``'s canonical pose."""
-        points = surface_points(body.rest_vertices, body.faces, self.face, self.barycentric)
-        return self.vertices + diffuse(points - self.source_points, self.edges, self.rate, self.steps)
 
 
 @dataclass
@@ -124,7 +86,7 @@ def draped_vertices(garment: Garment, body: Body, resolution: int) -> torch.Tens
     return settled.vertices
 
 
-class TeacherData:
+class TeacherData(EpisodeDraws):
     """Samples episodes for training (``split="train"``) from the config's garments and motions."""
 
     def __init__(self, config: DataConfig, seed: int = 0, progress=None):
@@ -158,11 +120,6 @@ class TeacherData:
                    for test in self.test_shapes):
                 return BodyShape(**values)
 
-    def sample_material(self) -> Material:
-        if self.random.random() < self.config.default_material_fraction:
-            return Material()
-        return sample_material(self.random.random)
-
     def sample_identity(self) -> Identity:
         name, vertices = self.random.choice(sorted(self.sources))
         return self.identity_for(name, vertices, self.sample_shape(), self.sample_material())
@@ -180,16 +137,6 @@ class TeacherData:
             garment = garment.with_vertices(draped_vertices(garment, body, vertices))
         return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
                               source.skin_weights, material, garment, vertices, self.config.drape)
-
-    def sample_window(self, frames: int, identity: Identity, at_end: bool = False) -> tuple[Motion, torch.Tensor]:
-        """A random training clip cut to ``frames`` frames (fewer if the clip is shorter),
-        ending where the clip ends (its hold) when ``at_end``; and its root path (T,3)
-        scaled to ``identity``'s leg length."""
-        motion = self.random.choice(self.motions)
-        frames = min(frames, motion.num_frames)
-        start = motion.num_frames - frames if at_end else self.random.randrange(0, motion.num_frames - frames + 1)
-        window = motion.slice(start, start + frames)
-        return window, window.root_translation * (identity.body.leg_length / self.default_body.leg_length)
 
     def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
         """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None)."""

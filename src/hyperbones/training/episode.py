@@ -18,7 +18,7 @@ from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import GRAVITY
-from hyperbones.physics.material import Material
+from hyperbones.physics.material import Material, sample_material
 from hyperbones.physics.strain_limit import StrainLimiter
 
 if TYPE_CHECKING:
@@ -104,4 +104,26 @@ def ballistic_hops(num_frames: int, fps: float, rng: random.Random,
     return torch.nn.functional.conv1d(heights[None, None], kernel[None, None])[0, 0].float()
 
 
-__all__ = ["Episode", "Identity", "ballistic_hops"]
+class EpisodeDraws:
+    """The draws ``TeacherData`` and ``PackData`` share: a fabric and a clip window. They
+    set ``random`` (``random.Random``), ``config`` (``DataConfig``), ``motions`` (each with
+    ``num_frames`` and ``slice``) and ``default_body`` (with ``leg_length``)."""
+
+    def sample_material(self) -> Material:
+        """HOOD's default fabric for ``data.default_material_fraction`` of draws, else one over HOOD's ranges."""
+        if self.random.random() < self.config.default_material_fraction:
+            return Material()
+        return sample_material(self.random.random)
+
+    def sample_window(self, frames: int, identity: Identity, at_end: bool = False):
+        """A random training motion cut to ``frames`` frames (fewer if it is shorter), ending
+        where it ends (its hold) when ``at_end``; and its root path (T,3) scaled to
+        ``identity``'s leg length."""
+        motion = self.random.choice(self.motions)
+        frames = min(frames, motion.num_frames)
+        start = motion.num_frames - frames if at_end else self.random.randrange(0, motion.num_frames - frames + 1)
+        window = motion.slice(start, start + frames)
+        return window, window.root_translation * (identity.body.leg_length / self.default_body.leg_length)
+
+
+__all__ = ["Episode", "EpisodeDraws", "Identity", "ballistic_hops"]

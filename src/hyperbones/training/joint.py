@@ -20,7 +20,6 @@ from pathlib import Path
 import torch
 
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.models.hyperbones import HyperBonesConfig, HyperBonesModel
 from hyperbones.models.loading import load_checkpoint
 from hyperbones.models.module_a import heading_frame
@@ -30,7 +29,6 @@ from hyperbones.runtime.identity import apply_encoder
 from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.loss import collision_weight_at, runtime_terms
-from hyperbones.training.rollouts import RolloutCache
 from hyperbones.training.trainer import TeacherTrainer, check_sections
 
 INITIAL_ROLLOUTS = 4  # made before the first step; the cache then grows by one per refresh
@@ -52,9 +50,22 @@ class JointTrainer(TeacherTrainer):
         if not config.joint.train_teacher:
             self.teacher.requires_grad_(False)  # Adam skips parameters without gradients
             self.teacher.eval()  # its input statistics stay as phase 1 left them
-        self.cache = RolloutCache(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
-                                  self.device, config.data.settle_dt)
-        self.runtime_proximity = BodyProximity(self.data.default_body.faces, device=self.device)
+        self.cache = self._make_rollouts()
+        self.runtime_proximity = self._make_runtime_proximity()
+
+    def _make_rollouts(self):
+        """The cache of C's rollouts that A learns from: simulated on Anny bodies, or a bank's."""
+        from hyperbones.training.rollouts import RolloutCache
+
+        config = self.config
+        return RolloutCache(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
+                            self.device, config.data.settle_dt)
+
+    def _make_runtime_proximity(self):
+        """The body search for A's interpenetration and collision terms (Warp's)."""
+        from hyperbones.geometry.proximity import BodyProximity
+
+        return BodyProximity(self.data.default_body.faces, device=self.device)
 
     def _build_model(self) -> torch.nn.Module:
         return HyperBonesModel(HyperBonesConfig(self.config.model, self.config.runtime))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
@@ -27,10 +28,11 @@ from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.models.teacher import Teacher
 from hyperbones.physics.material import Material
 from hyperbones.runtime.identity import IdentityGeometry
-from hyperbones.runtime.teacher_method import TeacherMethod
 from hyperbones.training.config import JointConfig
-from hyperbones.training.data import Identity as PhysicsIdentity
-from hyperbones.training.data import TeacherData
+from hyperbones.training.episode import Identity as PhysicsIdentity
+
+if TYPE_CHECKING:
+    from hyperbones.training.data import TeacherData
 
 
 @dataclass
@@ -127,6 +129,8 @@ class RolloutCache:
     def _draw(self, teacher: Teacher) -> SimulatedRollout:
         """One rollout of ``teacher`` (put in eval mode for it: its input statistics stay as
         they are) and its ``drift``."""
+        from hyperbones.runtime.teacher_method import TeacherMethod  # Warp's search and Anny's body
+
         data = self.data
         identity = data.sample_identity()
         at_end = data.random.random() < self.config.end_fraction
@@ -184,6 +188,10 @@ class RolloutCache:
                 rollout = self.load(self.data.random.choice(unused), step)
         if rollout is None:
             rollout = self.make(teacher, step)
+        return self.admit(rollout)
+
+    def admit(self, rollout: TeacherRollout) -> TeacherRollout:
+        """Put ``rollout`` in the cache, dropping the oldest when it is full."""
         if len(self.rollouts) >= self.config.cache_size:
             oldest = min(range(len(self.rollouts)), key=lambda i: self.rollouts[i].step)
             self.rollouts.pop(oldest)
@@ -234,6 +242,7 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     from tqdm import tqdm
 
     from hyperbones.models.loading import teacher_from_checkpoint
+    from hyperbones.training.data import TeacherData
 
     if count < 1:
         raise ParameterError("--count must be at least 1")

@@ -21,6 +21,7 @@ from __future__ import annotations
 import math
 import os
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import torch
@@ -29,16 +30,44 @@ from tqdm import tqdm
 
 from hyperbones.devices import pick_device
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.geometry.surface import push_outside
+from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.models.loading import load_checkpoint, teacher_state
 from hyperbones.models.teacher import Teacher, teacher_step
 from hyperbones.physics.energies import COLLISION_EPSILON
+from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.hard_contact import QUERY_DISTANCE, constrain_step
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.training.checkpoint import load_optimizer_state, save_training_state
 from hyperbones.training.config import TeacherTrainingConfig
-from hyperbones.training.data import Episode, TeacherData
 from hyperbones.training.loss import collision_weight_at, physics_terms
+
+@dataclass
+class EpisodeRun:
+    """What the steps of the current episode (or batch of episodes, as one garment) read.
+
+    topology, rest, limiter: the garment's (concatenated over a batch); body_vertices:
+    (K+2,Vb,3) the body along the window (a batch's bodies side by side); garment_lbs:
+    (K+2,V,3) the garment skinned along it; body_faces: (Fb,3); proximity: the body's
+    search (``BodyProximity`` or its torch twin), holding the body of the step to come;
+    episodes: how many the run holds (the loss is their mean); vertex_garment: (V,) the
+    episode of each vertex in a batch (its contact rounds stop on their own), else None.
+    """
+
+    topology: GarmentTopology
+    rest: ClothRest
+    limiter: StrainLimiter
+    body_vertices: torch.Tensor
+    garment_lbs: torch.Tensor
+    body_faces: torch.Tensor
+    proximity: object
+    episodes: int = 1
+    vertex_garment: torch.Tensor | None = None
+
+    @property
+    def num_steps(self) -> int:
+        return self.body_vertices.shape[0] - 2
+
 
 def learning_rate_at(step: int, config) -> float:
     """``config.learning_rate`` halved once for each of ``learning_rate_halve_at`` reached."""
@@ -77,16 +106,12 @@ class TeacherTrainer:
         self.ema: dict[str, torch.Tensor] | None = None  # the weights' moving average (train.ema_decay)
         self.checkpoint_path = self.run_dir / "checkpoint.pt"
         episode_seed = config.train.seed * 1000 + self.rank
-        if resume and self.checkpoint_path.exists():
-            payload = load_checkpoint(self.checkpoint_path, map_location=self.device)
-            if type(config).from_dict(payload["config"], str(self.checkpoint_path)).as_dict() != config.as_dict():
-                raise ParameterError(f"{self.checkpoint_path}: --resume with a different config than the run's")
-            self.model.load_state_dict(payload["model"])
-            self.optimizer.load_state_dict(load_optimizer_state(self.checkpoint_path, payload, self.device))
-            self.step = int(payload["step"])
-            self.ema = payload.get("ema")
+        self.deadline: float | None = None  # time.monotonic() at which train() stops early (saving first)
+        self.checkpoint_seconds: float | None = None  # also save this often (s), besides every checkpoint_every steps
+        if resume and self._has_state():
+            self._restore()
             episode_seed += 7919 * self.step
-        elif self.checkpoint_path.exists() and not resume:
+        elif self._has_state() and not resume:
             raise ParameterError(f"{self.run_dir} already holds a run: pass --resume to continue it or use another --out")
         elif config.train.init_from:
             self._initialise_from(Path(config.train.init_from))
@@ -94,10 +119,7 @@ class TeacherTrainer:
             self.ema = {name: value.detach().clone() for name, value in self.model.state_dict().items()}
         # What each simulation step calls: Module C, wrapped for DDP when training on several ranks.
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.teacher)
-        self.data = TeacherData(config.data, seed=episode_seed,
-                                progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
-        self.proximity = BodyProximity(self.data.default_body.faces, device=self.device)
-        self.body_faces = self.data.default_body.faces.to(self.device)
+        self._prepare_data(episode_seed)
         self.writer = None
         if self.is_main:
             from torch.utils.tensorboard import SummaryWriter
@@ -107,10 +129,46 @@ class TeacherTrainer:
             # the steps from purge_step on); the checkpoint's own step stays.
             self.writer = SummaryWriter(str(self.run_dir / "tensorboard"),
                                         purge_step=self.step + 1 if self.step else None)
-        self._episode: Episode | None = None
+        self._episode: EpisodeRun | None = None
         self._k = 0
         self._state = None
-        self._limiter = None  # the episode's strain limiter, on this rank's device
+
+    def _has_state(self) -> bool:
+        """Whether the run folder holds a state to resume."""
+        return self.checkpoint_path.exists()
+
+    def _restore(self) -> None:
+        """Model, optimiser, step and moving average from the run folder's checkpoint."""
+        payload = load_checkpoint(self.checkpoint_path, map_location=self.device)
+        self._check_resumed_config(payload["config"], self.checkpoint_path)
+        self.model.load_state_dict(payload["model"])
+        self.optimizer.load_state_dict(load_optimizer_state(self.checkpoint_path, payload, self.device))
+        self.step = int(payload["step"])
+        self.ema = payload.get("ema")
+
+    def _check_resumed_config(self, saved: dict, where) -> None:
+        config = self.config
+        if type(config).from_dict(saved, str(where)).as_dict() != config.as_dict():
+            raise ParameterError(f"{where}: --resume with a different config than the run's")
+
+    def _prepare_data(self, seed: int) -> None:
+        """Set ``data`` (what episodes are drawn from), ``proximity`` (the body's search) and
+        ``body_faces``: ``TeacherData`` on Anny bodies, with Warp's search."""
+        from hyperbones.geometry.proximity import BodyProximity
+        from hyperbones.training.data import TeacherData
+
+        self.data = TeacherData(self.config.data, seed=seed,
+                                progress=(lambda text: print(f"preparing {text}", flush=True)) if self.progress else None)
+        self.proximity = BodyProximity(self.data.default_body.faces, device=self.device)
+        self.body_faces = self.data.default_body.faces.to(self.device)
+
+    def _begin_episode(self, steps: int) -> EpisodeRun:
+        """A new episode of ``steps`` dynamic steps (one, here; the pack trainer's: a batch)."""
+        episode = self.data.sample_episode(steps)
+        identity = episode.identity
+        return EpisodeRun(identity.topology.to(self.device), identity.rest.to(self.device),
+                          identity.limiter.to(self.device), episode.body_vertices, episode.garment_lbs,
+                          self.body_faces, self.proximity)
 
     def _build_model(self) -> torch.nn.Module:
         """The module the optimiser trains (here the teacher alone)."""
@@ -172,51 +230,49 @@ class TeacherTrainer:
         L_phys's terms on the raw prediction, and the constrained, detached state carried on."""
         cfg = self.config
         if self._episode is None or self._k >= self._episode.num_steps:
-            self._episode = self.data.sample_episode(rollout_length(self.step, cfg.train))
-            lbs = self._episode.garment_lbs[1].to(self.device)
+            self._episode = run = self._begin_episode(rollout_length(self.step, cfg.train))
+            lbs = run.garment_lbs[1].to(self.device)
             noise = torch.randn_like(lbs) * cfg.data.start_noise
-            pinned = self._episode.identity.topology.pinned_mask.to(self.device)
+            pinned = run.topology.pinned_mask
             start = torch.where(pinned[:, None], lbs, lbs + noise)
             # LBS pushes some cloth into the body; left there, the collision term's gradient
             # (w up to 5e5, cubic in the depth) drowns every other term of the loss.
-            self.proximity.update(self._episode.body_vertices[1].to(self.device))
-            nearest = self.proximity.query(start, max_distance=QUERY_DISTANCE)
+            run.proximity.update(run.body_vertices[1].to(self.device))
+            nearest = run.proximity.query(start, max_distance=QUERY_DISTANCE)
             start = push_outside(start, nearest, COLLISION_EPSILON, movable=~pinned)
             self._state = (start, torch.zeros_like(lbs))
-            self._limiter = self._episode.identity.limiter.to(self.device)
             self._k = -1  # the settling step first
-        episode = self._episode
-        identity = episode.identity
-        topology = identity.topology.to(self.device)
-        rest = identity.rest.to(self.device)
+        run = self._episode
         if self._k < 0:
             frame_now = frame_next = 1
             dt = cfg.data.settle_dt
         else:
             frame_now, frame_next = self._k + 1, self._k + 2
             dt = 1.0 / 30.0
-        body_now = episode.body_vertices[frame_now].to(self.device)
-        body_next = episode.body_vertices[frame_next].to(self.device)
-        pinned_next = episode.garment_lbs[frame_next].to(self.device)
+        body_now = run.body_vertices[frame_now].to(self.device)
+        body_next = run.body_vertices[frame_next].to(self.device)
+        pinned_next = run.garment_lbs[frame_next].to(self.device)
         positions, velocities = self._state
-        # The BVH holds body_now already: posed at the episode's start, or by the last step's contact.
-        nearest = self.proximity.query(positions, max_distance=QUERY_DISTANCE)
-        positions_next, velocities_next = teacher_step(self.ddp, topology, rest, positions, velocities, pinned_next,
-                                                       body_now, body_next, self.body_faces, nearest, dt)
+        # The search holds body_now already: posed at the episode's start, or by the last step's contact.
+        nearest = run.proximity.query(positions, max_distance=QUERY_DISTANCE)
+        positions_next, velocities_next = teacher_step(self.ddp, run.topology, run.rest, positions, velocities,
+                                                       pinned_next, body_now, body_next, run.body_faces, nearest, dt)
         weight = collision_weight_at(self.step, cfg.train.collision_weight_start, cfg.train.collision_weight_end,
                                      cfg.train.collision_ramp_steps)
-        terms = physics_terms(positions_next, positions, velocities, rest, nearest, body_now, body_next,
-                              self.body_faces, weight, dt)
+        terms = physics_terms(positions_next, positions, velocities, run.rest, nearest, body_now, body_next,
+                              run.body_faces, weight, dt)
+        if run.episodes > 1:  # a batch's loss is the mean of its episodes' (their energies add up)
+            terms = {name: value / run.episodes for name, value in terms.items()}
         self._k += 1
         if torch.isfinite(positions_next).all():
             # The loss sees the raw prediction; the state carried on gets the runtime's strain
             # limiting and hard contact.
             positions_next, velocities_next = constrain_step(
-                positions_next.detach(), velocities_next.detach(), self._limiter, self.proximity, nearest, body_next,
-                ~topology.pinned_mask, COLLISION_EPSILON, QUERY_DISTANCE)
+                positions_next.detach(), velocities_next.detach(), run.limiter, run.proximity, nearest, body_next,
+                ~run.topology.pinned_mask, COLLISION_EPSILON, QUERY_DISTANCE, vertex_garment=run.vertex_garment)
             if self._k == 0:
                 # After settling, the garment moves with the body's LBS velocity at the first frame.
-                velocities_next = (episode.garment_lbs[1] - episode.garment_lbs[0]).to(self.device)
+                velocities_next = (run.garment_lbs[1] - run.garment_lbs[0]).to(self.device)
             self._state = (positions_next, velocities_next)
         else:
             self._episode = None  # a blown-up episode is dropped; the loss still pushes against it
@@ -241,9 +297,10 @@ class TeacherTrainer:
         total = self.config.train.steps if self.max_steps is None else min(self.config.train.steps, self.max_steps)
         bar = tqdm(total=total, initial=self.step, desc=f"train {self.label}", disable=not self.progress, unit="step")
         started, first_step = time.perf_counter(), self.step
+        saved_at = time.monotonic()
         running = {}
         try:
-            while self.step < total:
+            while self.step < total and not (self.deadline and time.monotonic() >= self.deadline):
                 logs = self._advance()
                 self.step += 1
                 for key, value in logs.items():
@@ -257,8 +314,12 @@ class TeacherTrainer:
                     bar.set_postfix({label: f"{running.get(key, math.nan):.3g}"
                                      for label, key in self.shown_terms().items()}, refresh=False)
                 bar.update(1)
-                if self.step % self.config.train.checkpoint_every == 0 or self.step == total:
+                timely = self.checkpoint_seconds and time.monotonic() - saved_at >= self.checkpoint_seconds
+                if self.step % self.config.train.checkpoint_every == 0 or self.step == total or timely:
                     self.save()
+                    saved_at = time.monotonic()
+            if self.step < total and self.step > first_step:  # stopped by the deadline
+                self.save()
         finally:
             bar.close()
             if self.writer:
@@ -285,6 +346,17 @@ class TeacherTrainer:
             dist.destroy_process_group()
 
 
+def train_to_end(trainer: TeacherTrainer) -> int:
+    """Run ``trainer`` and close it (leaving its process group alone if it failed); its last step."""
+    try:
+        step = trainer.train()
+    except BaseException:
+        trainer.close(finished=False)
+        raise
+    trainer.close()
+    return step
+
+
 def check_sections(path, payload: dict, config: TeacherTrainingConfig, sections: tuple[str, ...]) -> None:
     """Raise unless the checkpoint ``payload`` (from ``path``, a train.init_from) has the
     same ``sections`` of the config as ``config``."""
@@ -295,4 +367,4 @@ def check_sections(path, payload: dict, config: TeacherTrainingConfig, sections:
                                  f"this config {mine[section]}")
 
 
-__all__ = ["TeacherTrainer", "learning_rate_at", "check_sections", "rollout_length"]
+__all__ = ["EpisodeRun", "TeacherTrainer", "train_to_end", "learning_rate_at", "check_sections", "rollout_length"]

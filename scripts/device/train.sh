@@ -1,0 +1,56 @@
+#!/usr/bin/env bash
+# Training on the GPU machine (hyperbones.jobs.device_train), about 8 minutes a call, the run's
+# state committed in runs/device-PHASE/ between calls. PHASE: teacher (configs/teacher.toml) or
+# hyperbones (phase 2, $HYPERBONES_CONFIG below).
+#
+#   scripts/device/train.sh --prepare PHASE       here: the phase's pack and roma into .device/train (Anny, Warp)
+#   scripts/device/train.sh --dry-run PHASE       here: what the call carries, in MiB; exit 1 over 60
+#   scripts/device/train.sh PHASE                 on the GPU machine: resume, train, state to $OUT/state
+#   scripts/device/train.sh --cpu --quick PHASE   anywhere: the same job on the CPU, for seconds (the suite runs this)
+#
+# The device call (--dry-run prints it; .device/bench is left behind, only this phase's pack travels):
+#   run(command="bash scripts/device/train.sh teacher",
+#       carry=[".device/train/site", ".device/train/teacher.pack.pt"], timeout_s=600)
+# Then commit what came back (files_at: the reply's folder), and the next call goes on from it:
+#   rm -rf runs/device-teacher && cp -r --no-preserve=mode FILES_AT/state runs/device-teacher
+#   git add -A runs/device-teacher && git commit -m "Teacher on the GPU: N more minutes (step ...)"
+# TRAIN_ARGS passes options to the trainer (e.g. TRAIN_ARGS="--batch 16"); TRAIN_FOLDER, TRAIN_STATE
+# and TRAIN_MINUTES move the pack folder, the state folder and the minutes (the tests use them).
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+HYPERBONES_CONFIG=configs/hyperbones-small.toml
+PYTHON="${PYTHON:-python3}"
+FOLDER="${TRAIN_FOLDER:-.device/train}"
+mode=run device=cuda quick="" phase=""
+for arg in "$@"; do
+  case "$arg" in
+    --prepare) mode=prepare ;;
+    --dry-run) mode=size ;;
+    --cpu) device=cpu ;;
+    --quick) quick=--quick ;;
+    teacher|hyperbones) [ -z "$phase" ] || { echo "train.sh: one PHASE only" >&2; exit 2; }; phase=$arg ;;
+    *) echo "train.sh: unknown option $arg (--prepare, --dry-run, --cpu, --quick; PHASE teacher or hyperbones)" >&2
+       exit 2 ;;
+  esac
+done
+case "$phase" in
+  teacher) config=configs/teacher.toml ;;
+  hyperbones) config=$HYPERBONES_CONFIG ;;
+  *) echo "train.sh: which PHASE: teacher or hyperbones?" >&2; exit 2 ;;
+esac
+pack="$FOLDER/$phase.pack.pt" state="${TRAIN_STATE:-runs/device-$phase}"
+minutes="${TRAIN_MINUTES:-$([ -n "$quick" ] && echo 0.25 || echo 8)}"
+export PYTHONPATH="src:$FOLDER/site${PYTHONPATH:+:$PYTHONPATH}" PYTHONUNBUFFERED=1
+job=("$PYTHON" -m hyperbones.jobs.device_train)
+if [ $mode = prepare ]; then
+  exec "${job[@]}" prepare --config "$config" --pack "$pack" --site "$FOLDER/site" $quick
+fi
+if [ ! -f "$pack" ]; then
+  echo "train.sh: $pack missing: run scripts/device/train.sh --prepare $phase first" >&2
+  exit 2
+fi
+if [ $mode = size ]; then
+  exec "${job[@]}" size --phase "$phase" --carry "$FOLDER/site" "$pack" --state "$state" --minutes "$minutes"
+fi
+exec "${job[@]}" run --config "$config" --pack "$pack" --state "$state" --out "${OUT:-$FOLDER/out-$phase}" \
+  --device $device --minutes "$minutes" $quick ${TRAIN_ARGS:-}

@@ -1,0 +1,164 @@
+"""Phase 2's teacher rollouts made from a pack, many at once: ``RolloutCache``'s job in torch alone.
+
+A batch of identities (random pack bodies, templates, fabrics, clip windows of one length)
+is rolled out by C as one concatenated garment (``training.episode_batch``), with the same
+start, settling step, strain limiting and contact as ``runtime.teacher_rollout.StepRollout``,
+so a GPU makes hundreds of rollouts in the time one takes; the drift check of
+``training.rollouts`` keeps or refuses each. Each kept rollout gets its identity's geometry
+(virtual bones, UV maps, canonical graph) from the pack: the bones' picks and geodesic
+distances come from the template on the default body (geodesics need potpourri3d), their
+skinning weights from the skin under them on the rollout's body.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.geometry.surface import push_outside
+from hyperbones.geometry.torch_proximity import TorchProximity
+from hyperbones.geometry.uv_raster import UvRaster
+from hyperbones.models.cloth_graph import FRAME_DT, canonical_graph
+from hyperbones.models.teacher import teacher_step
+from hyperbones.physics.energies import COLLISION_EPSILON
+from hyperbones.physics.hard_contact import QUERY_DISTANCE, constrain_step
+from hyperbones.rig.virtual_bones import VirtualBones, bone_joint_weights, initial_log_weights
+from hyperbones.runtime.identity import IdentityGeometry
+from hyperbones.training.config import JointConfig
+from hyperbones.training.episode import Identity
+from hyperbones.training.episode_batch import BatchedProximity, EpisodeBatch
+from hyperbones.training.pack_data import PackData
+from hyperbones.training.rollouts import RolloutCache, TeacherRollout, drift
+
+
+@torch.no_grad()
+def roll_out(teacher, batch: EpisodeBatch, bodies: torch.Tensor, skinned: torch.Tensor,
+             proximity: BatchedProximity, settle_dt: float) -> torch.Tensor:
+    """C along T frames of a batch: bodies (T,B·Vb,3), skinned (T,N,3) the garments by LBS
+    -> (T,N,3). Frame 0 settles on the still first pose; frame t > 0 is the step t−1 -> t."""
+    movable = ~batch.topology.pinned_mask
+    proximity.update(bodies[0])
+    positions = push_outside(skinned[0], proximity.query(skinned[0], max_distance=QUERY_DISTANCE),
+                             COLLISION_EPSILON, movable=movable)
+    velocities = torch.zeros_like(positions)
+    frames = []
+    for t in range(bodies.shape[0]):
+        now, following = (0, 0) if t == 0 else (t - 1, t)
+        nearest = proximity.query(positions, max_distance=QUERY_DISTANCE)  # the search holds bodies[now]
+        positions, velocities = teacher_step(teacher, batch.topology, batch.rest, positions, velocities,
+                                             skinned[following], bodies[now], bodies[following], batch.body_faces,
+                                             nearest, settle_dt if t == 0 else FRAME_DT)
+        positions, velocities = constrain_step(positions, velocities, batch.limiter, proximity, nearest,
+                                               bodies[following], movable, COLLISION_EPSILON, QUERY_DISTANCE,
+                                               vertex_garment=batch.episode_of_vertex)
+        if t == 0:
+            velocities = torch.zeros_like(velocities)  # the first pose is held still before it
+        frames.append(positions)
+    return torch.stack(frames)
+
+
+class PackGeometry:
+    """Identity geometry (``IdentityGeometry``) of pack identities, torch only; UV rasters
+    (which depend on the template alone) are made once per template and resolution."""
+
+    def __init__(self, data: PackData, num_bones: int, uv_resolution: int, device: torch.device):
+        self.data, self.num_bones, self.uv_resolution, self.device = data, num_bones, uv_resolution, device
+        self.rasters: dict = {}
+        self.search = TorchProximity(data.pack.body_faces)
+
+    def build(self, identity: Identity) -> IdentityGeometry:
+        template = self.data.sources[(identity.name, identity.resolution)]
+        if template.bone_vertex is None or template.bone_vertex.shape[0] != self.num_bones:
+            have = 0 if template.bone_vertex is None else template.bone_vertex.shape[0]
+            raise ValueError(f"{self.data.pack.path}: {have} virtual bones per template, the config asks for "
+                             f"{self.num_bones} (make the pack with the phase-2 config)")
+        garment, body = identity.garment, identity.body
+        self.search.update(body.rest_vertices)
+        picked = template.bone_vertex
+        under_bones = self.search.query(identity.rest.rest_vertices[picked], max_distance=10.0)
+        bones = VirtualBones(garment.vertices[picked].clone(), picked,
+                             bone_joint_weights(under_bones, body.faces, body.skin_weights),
+                             initial_log_weights(template.bone_distance, garment.vertices, picked))
+        key = (identity.name, identity.resolution)
+        if key not in self.rasters:
+            self.rasters[key] = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices,
+                                               self.uv_resolution).to(self.device)
+        nearest = self.search.query(garment.vertices, max_distance=1.0)
+        graph = canonical_graph(identity.topology.to(self.device), body.rest_vertices.to(self.device),
+                                body.faces.to(self.device), _on(nearest, self.device))
+        return IdentityGeometry(identity.name, garment.vertices.to(self.device), garment.faces.to(self.device),
+                                body.rest_joint_positions.to(self.device), bones.to(self.device), self.rasters[key],
+                                graph, garment.uvs.to(self.device), garment.face_uvs.to(self.device))
+
+
+def _on(nearest, device):
+    from dataclasses import fields, replace
+
+    return replace(nearest, **{f.name: getattr(nearest, f.name).to(device) for f in fields(nearest)})
+
+
+class PackRollouts(RolloutCache):
+    """Up to ``config.cache_size`` rollouts of C (``RolloutCache``'s cache and draws), simulated
+    ``batch`` at a time on ``device`` from a pack instead of one by one on Anny bodies."""
+
+    def __init__(self, data: PackData, config: JointConfig, num_bones: int, uv_resolution: int,
+                 device: torch.device, settle_dt: float, batch: int):
+        super().__init__(data, config, num_bones, uv_resolution, device, settle_dt)
+        self.batch = max(1, int(batch))
+        self.geometry = PackGeometry(data, num_bones, uv_resolution, device)
+        self.waiting: list[TeacherRollout] = []  # simulated, not yet in the cache
+        self.simulated = 0
+
+    def simulate(self, teacher, step: int) -> list[TeacherRollout]:
+        """One batch of rollouts of ``teacher`` (in eval mode for it); those that pass the drift
+        check (all of them when none does, as ``RolloutCache`` keeps its last draw)."""
+        data = self.data
+        identities = [data.sample_identity() for _ in range(self.batch)]
+        windows = []
+        for identity in identities:
+            at_end = data.random.random() < self.config.end_fraction
+            windows.append((at_end, *data.sample_window(self.config.rollout_frames, identity, at_end=at_end)))
+        frames = min(window.num_frames for _, window, _ in windows)
+        cut = [(window.slice(window.num_frames - frames, window.num_frames) if at_end else window.slice(0, frames),
+                root[-frames:] if at_end else root[:frames]) for at_end, window, root in windows]
+        posed = [identity.body.to(self.device).posed(window.joint_rotations.to(self.device), root.to(self.device))
+                 for identity, (window, root) in zip(identities, cut)]
+        skinned = [linear_blend_skinning(identity.rest.rest_vertices.to(self.device),
+                                         identity.skin_weights.to(self.device), transforms)
+                   for identity, (_, transforms) in zip(identities, posed)]
+        batch = EpisodeBatch.of(identities, data.pack.body_faces).to(self.device)
+        proximity = batch.proximity(self.device)
+        bodies = torch.stack([vertices for vertices, _ in posed], 1).flatten(1, 2)  # (T,B·Vb,3)
+        was_training = teacher.training
+        teacher.eval()
+        try:
+            positions = roll_out(teacher, batch, bodies, torch.cat(skinned, 1), proximity, self.settle_dt)
+        finally:
+            teacher.train(was_training)
+        self.simulated += len(identities)
+        made, kept = [], []
+        for index, (identity, ours) in enumerate(zip(identities, torch.split(positions, batch.sizes, dim=1))):
+            rise, gap = drift(ours, skinned[index])
+            window, root = cut[index]
+            vertices, transforms = posed[index]
+            rollout = TeacherRollout(identity, self.geometry.build(identity), window.joint_rotations.to(self.device),
+                                     root.to(self.device), transforms, vertices, ours.float(),
+                                     identity.garment.edges().to(self.device), window.name, step)
+            made.append(rollout)
+            too_high = self.config.max_rise > 0 and rise > self.config.max_rise
+            too_far = self.config.max_gap > 0 and gap > self.config.max_gap
+            if not (too_high or too_far):
+                kept.append(rollout)
+        self.refused += len(made) - len(kept)
+        return kept or made
+
+    def refresh(self, teacher, step: int) -> TeacherRollout:
+        """Add a rollout (simulating a new batch when none is waiting), dropping the oldest when full."""
+        if not self.waiting:
+            self.waiting = self.simulate(teacher, step)
+        rollout = self.waiting.pop()
+        rollout.step = step
+        return self.admit(rollout)
+
+
+__all__ = ["PackGeometry", "PackRollouts", "roll_out"]
