@@ -6,6 +6,7 @@ potpourri3d fails; Module A overfits one fixed batch of teacher frames."""
 from __future__ import annotations
 
 import json
+import os
 import math
 import subprocess
 import sys
@@ -205,3 +206,19 @@ def test_module_a_overfits_one_fixed_batch_of_teacher_frames(packs, tmp_path):
     trainer.close()
     first, last = sum(losses[:2]) / 2, sum(losses[-2:]) / 2
     assert last < first / 5, (first, last)
+
+
+def test_phase_1_trains_under_torchrun_with_a_batch_per_process(packs, tmp_path):
+    """Two processes (DDP over gloo), a batch of two episodes each: one state, the summary counts both."""
+    _, teacher_config, teacher_pack, _, _ = packs
+    run = tmp_path / "ddp"
+    command = [sys.executable, "-m", "torch.distributed.run", "--standalone", "--nproc_per_node=2",
+               "-m", "hyperbones.training.from_pack", "--pack", str(teacher_pack), "--config", str(teacher_config),
+               "--out", str(run), "--batch", "2", "--max-steps", "2", "--device", "cpu", "--quiet"]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=ROOT,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert done.returncode == 0, done.stderr[-3000:]
+    summaries = [json.loads(line) for line in done.stdout.splitlines() if line.startswith("{")]
+    assert len(summaries) == 1 and summaries[0]["processes"] == 2 and summaries[0]["step"] == 2
+    assert (run / "index.pt").exists()
+    assert all(math.isfinite(value) for _, value in logged(run)["loss"])

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from hyperbones.geometry.search import search_backend
 from hyperbones.geometry.surface import Nearest
 from hyperbones.geometry.torch_proximity import TorchProximity
 
@@ -25,7 +26,7 @@ def multi_body_faces(faces: torch.Tensor, num_bodies: int, num_body_vertices: in
 
 
 class BatchedProximity:
-    """``TorchProximity`` over B bodies of one mesh, with the one-body API of ``BodyProximity``.
+    """B bodies of one mesh searched at once, with the one-body API of ``BodyProximity``.
 
     ``update`` takes the multi-body (B·Vb,3) or (B,Vb,3); ``query`` takes the B garments'
     points flat, (N,3), and answers flat; ``faces`` is the multi-body's (B·F,3), body b's
@@ -35,13 +36,17 @@ class BatchedProximity:
     sign = TorchProximity.sign
 
     def __init__(self, faces: torch.Tensor, num_body_vertices: int, vertex_offsets: torch.Tensor,
-                 device: str | torch.device | None = "cpu", **search_options):
+                 device: str | torch.device | None = "cpu", search: str = "auto", **search_options):
         """faces: (F,3) one body's triangles; num_body_vertices: Vb, the vertices of one body;
         vertex_offsets: (B+1,) where each garment's points start in the flat points (the last
-        is N); device: where the search runs (None: faces'); search_options: ``TorchProximity``'s
-        cluster_size, group_size, memory_budget."""
+        is N); device: where the search runs (None: faces'); search: "auto", "warp" or "torch"
+        (``geometry.search.search_backend``: Warp's BVH per body on a CPU that has it, 4–5×
+        faster there; the torch search over all bodies at once elsewhere); search_options:
+        ``TorchProximity``'s cluster_size, group_size, memory_budget."""
         self.search = TorchProximity(faces, device, **search_options)
         self.device = self.search.device
+        self.backend = search_backend(search, self.device)
+        self._bodies: list | None = None  # Warp: one search per body, made on the first update
         offsets = vertex_offsets.to(device=self.device, dtype=torch.int64)
         counts = offsets.diff()
         if offsets.dim() != 1 or len(counts) < 1 or bool((counts < 1).any()) or int(offsets[0]) != 0:
@@ -49,6 +54,7 @@ class BatchedProximity:
                              f"got {offsets.tolist()}")
         self.num_bodies, self.num_body_vertices = len(counts), int(num_body_vertices)
         self.num_points, self.row_length = int(offsets[-1]), int(counts.max())
+        self._sizes = counts.tolist()
         num_faces = self.search.faces.shape[0]
         bodies = torch.arange(self.num_bodies, device=self.device)
         self.faces = multi_body_faces(self.search.faces, self.num_bodies, self.num_body_vertices)
@@ -65,7 +71,17 @@ class BatchedProximity:
         if body_vertices.reshape(-1, 3).shape != expected:
             raise ValueError(f"body_vertices {tuple(body_vertices.shape)} must hold {self.num_bodies} bodies "
                              f"of {self.num_body_vertices} vertices")
-        self.search.update(body_vertices.reshape(self.num_bodies, self.num_body_vertices, 3))
+        bodies = body_vertices.reshape(self.num_bodies, self.num_body_vertices, 3)
+        if self.backend == "torch":
+            self.search.update(bodies)
+            return
+        if self._bodies is None:
+            from hyperbones.geometry.proximity import BodyProximity
+
+            self._bodies = [BodyProximity(self.search.faces, self.device, sign=self.sign)
+                            for _ in range(self.num_bodies)]
+        for search, body in zip(self._bodies, bodies):
+            search.update(body)
 
     def query(self, points: torch.Tensor, max_distance: float | torch.Tensor = 1.0) -> Nearest:
         """Nearest face of each of the B garments' ``points`` (N,3) on its own body, within
@@ -73,6 +89,8 @@ class BatchedProximity:
         device, floats in its dtype, ``face`` in the multi-body's numbering."""
         if points.shape != (self.num_points, 3):
             raise ValueError(f"points {tuple(points.shape)} must be the batch's ({self.num_points}, 3)")
+        if self.backend == "warp":
+            return self._query_each(points, max_distance)
         rows = points.detach().to(self.device).index_select(0, self._sources)
         if isinstance(max_distance, torch.Tensor):
             if max_distance.numel() != self.num_points:
@@ -84,6 +102,19 @@ class BatchedProximity:
         fields = [getattr(answer, name).flatten(0, 1).index_select(0, self._slots)
                   for name in ("point", "barycentric", "normal", "signed_distance")]
         return Nearest(*(value.to(points.device) for value in [face, *fields]))
+
+    def _query_each(self, points: torch.Tensor, max_distance: float | torch.Tensor) -> Nearest:
+        """``query`` by one Warp search per body over its garment's points."""
+        if self._bodies is None:
+            raise RuntimeError("BatchedProximity.query called before update(body_vertices)")
+        sizes = self._sizes
+        ranges = (max_distance.reshape(-1).split(sizes) if isinstance(max_distance, torch.Tensor)
+                  else [max_distance] * len(sizes))
+        answers = [search.query(part, limit) for search, part, limit in zip(self._bodies, points.split(sizes), ranges)]
+        face = torch.cat([answer.face for answer in answers]).to(self._face_offsets.device)
+        face = torch.where(face >= 0, face + self._face_offsets, face).to(points.device)
+        return Nearest(face, *(torch.cat([getattr(answer, name) for answer in answers])
+                               for name in ("point", "barycentric", "normal", "signed_distance")))
 
 
 __all__ = ["BatchedProximity", "multi_body_faces"]

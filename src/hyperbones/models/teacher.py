@@ -55,6 +55,21 @@ class Teacher(nn.Module):
         return self.decoder(latents)
 
 
+class Autocast(nn.Module):
+    """``module`` called under ``torch.autocast`` in ``dtype`` (bfloat16): matrix products in
+    that precision, its output back in float32. Only the network: what builds its inputs (the
+    cloth's internal forces) and what reads its output (integration, the loss) stay float32."""
+
+    def __init__(self, module: nn.Module, dtype: torch.dtype = torch.bfloat16):
+        super().__init__()
+        self.module, self.dtype = module, dtype
+
+    def forward(self, *args):
+        device = next(self.module.parameters()).device
+        with torch.autocast(device_type=device.type, dtype=self.dtype):
+            return self.module(*args).float()
+
+
 def integrate(positions: torch.Tensor, velocities: torch.Tensor, acceleration: torch.Tensor,
               pinned_mask: torch.Tensor, pinned_next: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """Symplectic Euler in per-step units: (V,3) ×3, (V,) mask, (V,3) -> x(t+1), v(t+1).

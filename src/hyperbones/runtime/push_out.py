@@ -17,6 +17,7 @@ from __future__ import annotations
 import torch
 
 from hyperbones.errors import ParameterError
+from hyperbones.geometry.search import search_backend
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.stage_clock import NO_CLOCK
 
@@ -206,26 +207,6 @@ class BodyContact:
             garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
             moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
         return garment, nearest
-
-
-SEARCHES = ("auto", "warp", "torch")
-
-
-def search_backend(search: str, device: str | torch.device) -> str:
-    """The nearest-face search to use: ``search`` as asked, or for "auto" Warp's BVH on the CPU
-    when Warp is installed (the fastest measured there) and the torch search otherwise."""
-    if search not in SEARCHES:
-        raise ParameterError(f"contact search must be one of {', '.join(SEARCHES)}, got {search!r}")
-    if search != "auto":
-        return search
-    if torch.device(device).type != "cpu":
-        return "torch"
-    import importlib.util
-
-    try:
-        return "warp" if importlib.util.find_spec("warp") is not None else "torch"
-    except ValueError:  # warp blocked in sys.modules (set to None)
-        return "torch"
 
 
 def _skin_points(nearest) -> torch.Tensor:

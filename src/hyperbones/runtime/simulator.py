@@ -142,7 +142,7 @@ class Simulator:
         """body_faces: (F,3) the characters' body triangles (one topology, as Anny's); with
         them and ``config.contact``, ``step`` can take the posed bodies and resolve contact.
         config: every setting of the follow, contact and projection steps; search: the
-        nearest-face search, "warp", "torch" or "auto" (``runtime.push_out.search_backend``:
+        nearest-face search, "warp", "torch" or "auto" (``geometry.search.search_backend``:
         the answers are the same, only where it runs and its speed differ)."""
         if not identities:
             raise ParameterError("Simulator needs at least one identity")

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -50,6 +51,8 @@ class PackTraining:
         self.step, self.ema = step, ema
 
     def save(self) -> None:
+        if not self.is_main:
+            return
         self.writer.flush()
         save_compact_state(self.run_dir, self.model.state_dict(), self.ema, self.optimizer.state_dict(), self.step,
                            self.config.as_dict())
@@ -86,7 +89,7 @@ class PackJointTrainer(PackTraining, JointTrainer):
 
         config = self.config
         return PackRollouts(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
-                            self.device, config.data.settle_dt, self.rollout_batch)
+                            self.device, config.data.settle_dt, self.rollout_batch, config.train.bfloat16)
 
     def _make_runtime_proximity(self):
         from hyperbones.geometry.torch_proximity import TorchProximity
@@ -117,7 +120,9 @@ def main(argv: list[str] | None = None) -> int:
         prog="python -m hyperbones.training.from_pack",
         description="Train from a training pack (hyperbones pack) with torch alone: phase 1 for a teacher config, "
                     "phase 2 for a config with [joint]. The run folder holds a compact resumable state (index.pt "
-                    "and shards under 15 MiB) and TensorBoard logs; it ends with a one-line JSON summary.")
+                    "and shards under 15 MiB) and TensorBoard logs; it ends with a one-line JSON summary. Phase 1 "
+                    "also runs under torchrun (DDP, a batch per process: on two CPU cores, two processes of one "
+                    "thread each beat one of two).")
     parser.add_argument("--pack", required=True, help="training pack written by `hyperbones pack` for this config")
     parser.add_argument("--config", required=True, help="TOML training config (the one the pack was made for)")
     parser.add_argument("--out", required=True, help="run folder")
@@ -168,9 +173,12 @@ def main(argv: list[str] | None = None) -> int:
     first, started = trainer.step, time.perf_counter()
     step = train_to_end(trainer)
     seconds = time.perf_counter() - started
-    print(json.dumps({"step": step, "steps_this_run": step - first, "seconds": round(seconds, 1),
-                      "episode_steps_per_second": round(trainer.episode_steps / max(seconds, 1e-9), 2),
-                      "batch": batch, "device": str(trainer.device), "state": str(Path(args.out).resolve())}))
+    if trainer.is_main:  # every process steps its own batches of the same size, in lockstep
+        processes = int(os.environ.get("WORLD_SIZE", "1"))
+        print(json.dumps({"step": step, "steps_this_run": step - first, "seconds": round(seconds, 1),
+                          "episode_steps_per_second": round(processes * trainer.episode_steps / max(seconds, 1e-9), 2),
+                          "batch": batch, "processes": processes, "device": str(trainer.device),
+                          "state": str(Path(args.out).resolve())}))
     return 0
 
 

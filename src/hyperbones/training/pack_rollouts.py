@@ -19,7 +19,7 @@ from hyperbones.geometry.surface import push_outside
 from hyperbones.geometry.torch_proximity import TorchProximity
 from hyperbones.geometry.uv_raster import UvRaster
 from hyperbones.models.cloth_graph import FRAME_DT, canonical_graph
-from hyperbones.models.teacher import teacher_step
+from hyperbones.models.teacher import Autocast, teacher_step
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.hard_contact import QUERY_DISTANCE, constrain_step
 from hyperbones.rig.virtual_bones import VirtualBones, bone_joint_weights, initial_log_weights
@@ -102,9 +102,9 @@ class PackRollouts(RolloutCache):
     ``batch`` at a time on ``device`` from a pack instead of one by one on Anny bodies."""
 
     def __init__(self, data: PackData, config: JointConfig, num_bones: int, uv_resolution: int,
-                 device: torch.device, settle_dt: float, batch: int):
+                 device: torch.device, settle_dt: float, batch: int, bfloat16: bool = False):
         super().__init__(data, config, num_bones, uv_resolution, device, settle_dt)
-        self.batch = max(1, int(batch))
+        self.batch, self.bfloat16 = max(1, int(batch)), bfloat16  # bfloat16: C's network in autocast
         self.geometry = PackGeometry(data, num_bones, uv_resolution, device)
         self.waiting: list[TeacherRollout] = []  # simulated, not yet in the cache
         self.simulated = 0
@@ -132,7 +132,8 @@ class PackRollouts(RolloutCache):
         was_training = teacher.training
         teacher.eval()
         try:
-            positions = roll_out(teacher, batch, bodies, torch.cat(skinned, 1), proximity, self.settle_dt)
+            network = Autocast(teacher) if self.bfloat16 else teacher
+            positions = roll_out(network, batch, bodies, torch.cat(skinned, 1), proximity, self.settle_dt)
         finally:
             teacher.train(was_training)
         self.simulated += len(identities)

@@ -33,7 +33,7 @@ from hyperbones.errors import ParameterError
 from hyperbones.geometry.surface import push_outside
 from hyperbones.models.cloth_graph import GarmentTopology
 from hyperbones.models.loading import load_checkpoint, teacher_state
-from hyperbones.models.teacher import Teacher, teacher_step
+from hyperbones.models.teacher import Autocast, Teacher, teacher_step
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.hard_contact import QUERY_DISTANCE, constrain_step
@@ -119,6 +119,8 @@ class TeacherTrainer:
             self.ema = {name: value.detach().clone() for name, value in self.model.state_dict().items()}
         # What each simulation step calls: Module C, wrapped for DDP when training on several ranks.
         self.ddp = (torch.nn.parallel.DistributedDataParallel(self.model) if self.distributed else self.teacher)
+        if config.train.bfloat16:
+            self.ddp = Autocast(self.ddp)
         self._prepare_data(episode_seed)
         self.writer = None
         if self.is_main:
