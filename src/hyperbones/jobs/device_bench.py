@@ -79,8 +79,9 @@ def copy_package(name: str, site: str | Path) -> Path:
     import importlib.util
 
     copy = Path(site) / name
-    shutil.copytree(importlib.util.find_spec(name).submodule_search_locations[0], copy, dirs_exist_ok=True,
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    source = Path(importlib.util.find_spec(name).submodule_search_locations[0])
+    if source.resolve() != copy.resolve():  # a second --prepare finds the first one's copy on PYTHONPATH
+        shutil.copytree(source, copy, dirs_exist_ok=True, ignore=shutil.ignore_patterns("__pycache__"))
     return copy
 
 
