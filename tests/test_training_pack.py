@@ -222,3 +222,16 @@ def test_phase_1_trains_under_torchrun_with_a_batch_per_process(packs, tmp_path)
     assert len(summaries) == 1 and summaries[0]["processes"] == 2 and summaries[0]["step"] == 2
     assert (run / "index.pt").exists()
     assert all(math.isfinite(value) for _, value in logged(run)["loss"])
+
+
+def test_phase_2_refuses_a_pack_without_its_bones(packs, tmp_path):
+    from hyperbones.training.from_pack import main
+
+    _, _, teacher_pack, joint_config, _ = packs
+    with pytest.raises(ParameterError, match="teacher.pt: 0 virtual bones per template, the config asks for 32"):
+        from hyperbones.training.from_pack import trainer_for
+
+        trainer_for(apply_overrides(load_config(joint_config), ["train.device=cpu"]), tmp_path / "a",
+                    TrainingPack(teacher_pack), progress=False)
+    assert main(["--pack", str(teacher_pack), "--config", str(joint_config), "--out", str(tmp_path / "b"),
+                 "--device", "cpu", "--quiet"]) == 2

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import torch
 
+from hyperbones.errors import ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.surface import push_outside
 from hyperbones.geometry.torch_proximity import TorchProximity
@@ -62,16 +63,16 @@ class PackGeometry:
     (which depend on the template alone) are made once per template and resolution."""
 
     def __init__(self, data: PackData, num_bones: int, uv_resolution: int, device: torch.device):
+        """Raises a ``ParameterError`` naming the pack unless its templates have ``num_bones`` bones."""
         self.data, self.num_bones, self.uv_resolution, self.device = data, num_bones, uv_resolution, device
+        if data.pack.num_bones != num_bones:
+            raise ParameterError(f"{data.pack.path}: {data.pack.num_bones} virtual bones per template, the config "
+                                 f"asks for {num_bones} (make the pack with this phase-2 config)")
         self.rasters: dict = {}
         self.search = TorchProximity(data.pack.body_faces)
 
     def build(self, identity: Identity) -> IdentityGeometry:
         template = self.data.sources[(identity.name, identity.resolution)]
-        if template.bone_vertex is None or template.bone_vertex.shape[0] != self.num_bones:
-            have = 0 if template.bone_vertex is None else template.bone_vertex.shape[0]
-            raise ValueError(f"{self.data.pack.path}: {have} virtual bones per template, the config asks for "
-                             f"{self.num_bones} (make the pack with the phase-2 config)")
         garment, body = identity.garment, identity.body
         self.search.update(body.rest_vertices)
         picked = template.bone_vertex
