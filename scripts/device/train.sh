@@ -3,7 +3,8 @@
 # state committed in runs/device-PHASE/ between calls. PHASE: teacher (configs/teacher.toml) or
 # hyperbones (phase 2, $HYPERBONES_CONFIG below).
 #
-#   scripts/device/train.sh --prepare PHASE       here: the phase's pack and roma into .device/train (Anny, Warp)
+#   scripts/device/train.sh --prepare PHASE       here: the phase's pack and roma into .device/train (Anny, Warp;
+#                                                 PYTHON=.venv/bin/python: the Python that has them, python3 by default)
 #   scripts/device/train.sh --dry-run PHASE       here: what the call carries, in MiB; exit 1 over 60
 #   scripts/device/train.sh PHASE                 on the GPU machine: resume, train, state to $OUT/state
 #   scripts/device/train.sh --cpu --quick PHASE   anywhere: the same job on the CPU, for seconds (the suite runs this)
