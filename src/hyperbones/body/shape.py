@@ -60,3 +60,12 @@ class BodyShape:
                 raise ParameterError(f"--body: {key}={raw} is out of range [0, 1]")
             values[key] = value
         return cls(**values)
+
+
+def draw_training_shape(uniform, held_out: list[BodyShape], margin: float) -> BodyShape:
+    """A phenotype uniform over [0,1]^6 (``uniform()`` in [0, 1), one per key), drawn again until
+    it is at least ``margin`` (L2 over the six values) from every ``held_out`` shape."""
+    while True:
+        values = {key: uniform() for key in PHENOTYPE_KEYS}
+        if all(math.dist(values.values(), shape.as_dict().values()) >= margin for shape in held_out):
+            return BodyShape(**values)

@@ -43,6 +43,13 @@ def add_device(parser: argparse.ArgumentParser, default: str = "auto") -> None:
     parser.add_argument("--device", default=default, help=f"cpu, cuda or auto: CUDA when present (default: {default})")
 
 
+def add_set(parser: argparse.ArgumentParser) -> None:
+    """--set SECTION.KEY=VALUE (repeatable): one training-config field overridden (``training.config.apply_overrides``)."""
+    parser.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
+                        help="override one config field, e.g. train.steps=500 or data.train_clips='[\"01_01\"]' "
+                             "(repeatable; the value is read as TOML, else as text)")
+
+
 def add_quiet(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
 

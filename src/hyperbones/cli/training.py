@@ -34,9 +34,7 @@ def add_train(sub) -> None:
                                        "every train.checkpoint_every steps, config inside) and TensorBoard logs in "
                                        "OUT/tensorboard. Every field is documented in hyperbones.training.config.")
     train.add_argument("--config", required=True, help="TOML training config")
-    train.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
-                       help="override one config field, e.g. train.steps=500 or data.train_clips='[\"01_01\"]' "
-                            "(repeatable; the value is read as TOML, else as text)")
+    options.add_set(train)
     options.add_out(train, "run folder")
     train.add_argument("--resume", action="store_true", help="continue the run in --out from its checkpoint")
     train.add_argument("--max-steps", type=int, default=None, help="stop at this step (below train.steps)")
@@ -146,8 +144,7 @@ def add_pack(sub) -> None:
                                       "ranges, so `python -m hyperbones.training.from_pack` can train where only "
                                       "torch is installed (a GPU machine). See the README, \"Training on a GPU\".")
     pack.add_argument("--config", required=True, help="TOML training config (teacher or phase 2)")
-    pack.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
-                      help="override one config field, as for train (repeatable)")
+    options.add_set(pack)
     options.add_out(pack, "pack file (.pt)")
     pack.add_argument("--bodies", type=int, default=256,
                       help="training body shapes to draw, away from the held-out bodies (default: 256)")

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import random
 import warnings
 from dataclasses import dataclass, replace
@@ -24,7 +23,7 @@ from pathlib import Path
 import torch
 
 from hyperbones.body.anny_body import Body, body_for
-from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
+from hyperbones.body.shape import BodyShape, draw_training_shape
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.garment.drape import drape
 from hyperbones.garment.draped import CACHE_VERSION as DRAPE_CACHE_VERSION
@@ -114,11 +113,7 @@ class TeacherData(EpisodeDraws):
 
     def sample_shape(self) -> BodyShape:
         """A phenotype uniform over [0,1]^6, away from every held-out shape."""
-        while True:
-            values = {key: self.random.random() for key in PHENOTYPE_KEYS}
-            if all(math.dist(values.values(), test.as_dict().values()) >= self.config.test_body_margin
-                   for test in self.test_shapes):
-                return BodyShape(**values)
+        return draw_training_shape(self.random.random, self.test_shapes, self.config.test_body_margin)
 
     def sample_identity(self) -> Identity:
         name, vertices = self.random.choice(sorted(self.sources))

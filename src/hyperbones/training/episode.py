@@ -58,8 +58,9 @@ class Identity:
                    garment, resolution, draped)
 
     def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
-        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS."""
-        return linear_blend_skinning(self.rest.rest_vertices, self.skin_weights, skinning_transforms)
+        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS, on their device."""
+        return linear_blend_skinning(self.rest.rest_vertices.to(skinning_transforms),
+                                     self.skin_weights.to(skinning_transforms), skinning_transforms)
 
 
 @dataclass

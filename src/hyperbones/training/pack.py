@@ -20,7 +20,6 @@ The trainer checks that the config it runs has the data fields the pack was made
 
 from __future__ import annotations
 
-import math
 import random
 from dataclasses import asdict
 from pathlib import Path
@@ -54,17 +53,11 @@ def pack_bones(config: TeacherTrainingConfig) -> int:
 def training_shapes(config: TeacherTrainingConfig, count: int, seed: int = 0) -> list:
     """``count`` distinct body shapes drawn uniformly over the phenotype cube, each at least
     ``data.test_body_margin`` from every test and validation body (``TeacherData.sample_shape``'s rule)."""
-    from hyperbones.body.shape import PHENOTYPE_KEYS, BodyShape
+    from hyperbones.body.shape import BodyShape, draw_training_shape
 
     held_out = [BodyShape.parse(text) for text in (*config.data.test_bodies, *config.data.validation_bodies)]
     draw = random.Random(seed)
-    shapes = []
-    while len(shapes) < count:
-        values = {key: draw.random() for key in PHENOTYPE_KEYS}
-        if all(math.dist(values.values(), shape.as_dict().values()) >= config.data.test_body_margin
-               for shape in held_out):
-            shapes.append(BodyShape(**values))
-    return shapes
+    return [draw_training_shape(draw.random, held_out, config.data.test_body_margin) for _ in range(count)]
 
 
 def body_table(shapes: list, progress=None) -> dict[str, torch.Tensor]:

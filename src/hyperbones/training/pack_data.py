@@ -18,7 +18,6 @@ from hyperbones.body.rig import BodyRig
 from hyperbones.body.skeleton import NUM_JOINTS
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.garment.garment import Garment
-from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.io_utils import load_versioned
 from hyperbones.physics.material import Material
 from hyperbones.training.config import DataConfig
@@ -176,6 +175,14 @@ class PackData(EpisodeDraws):
         return Identity.build(name, body, rest_vertices, garment.faces, garment.pinned, source.skin_weights,
                               material, garment, vertices, False)
 
+    def pose(self, identity: Identity, joint_rotations: torch.Tensor, root: torch.Tensor
+             ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """``identity``'s body along (T,31,3,3) rotations and a (T,3) root path, on ``device``:
+        (T,Vb,3) its vertices, (T,31,4,4) skinning transforms and (T,V,3) the garment by LBS."""
+        vertices, transforms = identity.body.to(self.device).posed(joint_rotations.to(self.device),
+                                                                   root.to(self.device))
+        return vertices, transforms, identity.skin(transforms)
+
     def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
         """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None),
         its body and skinned garment on ``device``."""
@@ -184,10 +191,7 @@ class PackData(EpisodeDraws):
         if self.random.random() < self.config.airborne_fraction:
             root = root.clone()
             root[:, 2] += ballistic_hops(window.num_frames, window.fps, self.random, self.config.hop_speeds)
-        rig = identity.body.to(self.device)
-        vertices, transforms = rig.posed(window.joint_rotations.to(self.device), root.to(self.device))
-        garment_lbs = linear_blend_skinning(identity.rest.rest_vertices.to(self.device),
-                                            identity.skin_weights.to(self.device), transforms)
+        vertices, _, garment_lbs = self.pose(identity, window.joint_rotations, root)
         return Episode(identity, vertices, garment_lbs, window.name)
 
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import torch
 
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.surface import push_outside
 from hyperbones.geometry.torch_proximity import TorchProximity
 from hyperbones.geometry.uv_raster import UvRaster
@@ -69,33 +68,28 @@ class PackGeometry:
             raise ParameterError(f"{data.pack.path}: {data.pack.num_bones} virtual bones per template, the config "
                                  f"asks for {num_bones} (make the pack with this phase-2 config)")
         self.rasters: dict = {}
-        self.search = TorchProximity(data.pack.body_faces)
+        self.search = TorchProximity(data.pack.body_faces, device=device)
 
     def build(self, identity: Identity) -> IdentityGeometry:
+        """The geometry of ``identity`` (its carried garment at rest on its canonical body), on the device."""
+        device = self.device
         template = self.data.sources[(identity.name, identity.resolution)]
         garment, body = identity.garment, identity.body
-        self.search.update(body.rest_vertices)
-        picked = template.bone_vertex
-        under_bones = self.search.query(identity.rest.rest_vertices[picked], max_distance=10.0)
-        bones = VirtualBones(garment.vertices[picked].clone(), picked,
-                             bone_joint_weights(under_bones, body.faces, body.skin_weights),
-                             initial_log_weights(template.bone_distance, garment.vertices, picked))
+        faces, canonical_body = body.faces.to(device), body.rest_vertices.to(device)
+        vertices, picked = garment.vertices.to(device), template.bone_vertex.to(device)
+        self.search.update(canonical_body)
+        under_bones = self.search.query(identity.rest.rest_vertices.to(device)[picked], max_distance=10.0)
+        bones = VirtualBones(vertices[picked].clone(), picked,
+                             bone_joint_weights(under_bones, faces, body.skin_weights.to(device)),
+                             initial_log_weights(template.bone_distance.to(device), vertices, picked))
         key = (identity.name, identity.resolution)
         if key not in self.rasters:
             self.rasters[key] = UvRaster.build(garment.faces, garment.uvs, garment.face_uvs, garment.num_vertices,
-                                               self.uv_resolution).to(self.device)
-        nearest = self.search.query(garment.vertices, max_distance=1.0)
-        graph = canonical_graph(identity.topology.to(self.device), body.rest_vertices.to(self.device),
-                                body.faces.to(self.device), _on(nearest, self.device))
-        return IdentityGeometry(identity.name, garment.vertices.to(self.device), garment.faces.to(self.device),
-                                body.rest_joint_positions.to(self.device), bones.to(self.device), self.rasters[key],
-                                graph, garment.uvs.to(self.device), garment.face_uvs.to(self.device))
-
-
-def _on(nearest, device):
-    from dataclasses import fields, replace
-
-    return replace(nearest, **{f.name: getattr(nearest, f.name).to(device) for f in fields(nearest)})
+                                               self.uv_resolution).to(device)
+        graph = canonical_graph(identity.topology.to(device), canonical_body, faces,
+                                self.search.query(vertices, max_distance=1.0))
+        return IdentityGeometry(identity.name, vertices, garment.faces.to(device), body.rest_joint_positions.to(device),
+                                bones, self.rasters[key], graph, garment.uvs.to(device), garment.face_uvs.to(device))
 
 
 class PackRollouts(RolloutCache):
@@ -122,14 +116,11 @@ class PackRollouts(RolloutCache):
         frames = min(window.num_frames for _, window, _ in windows)
         cut = [(window.slice(window.num_frames - frames, window.num_frames) if at_end else window.slice(0, frames),
                 root[-frames:] if at_end else root[:frames]) for at_end, window, root in windows]
-        posed = [identity.body.to(self.device).posed(window.joint_rotations.to(self.device), root.to(self.device))
-                 for identity, (window, root) in zip(identities, cut)]
-        skinned = [linear_blend_skinning(identity.rest.rest_vertices.to(self.device),
-                                         identity.skin_weights.to(self.device), transforms)
-                   for identity, (_, transforms) in zip(identities, posed)]
+        posed = [data.pose(identity, window.joint_rotations, root) for identity, (window, root) in zip(identities, cut)]
+        skinned = [garment for _, _, garment in posed]
         batch = EpisodeBatch.of(identities, data.pack.body_faces).to(self.device)
         proximity = batch.proximity(self.device)
-        bodies = torch.stack([vertices for vertices, _ in posed], 1).flatten(1, 2)  # (T,B·Vb,3)
+        bodies = torch.stack([vertices for vertices, _, _ in posed], 1).flatten(1, 2)  # (T,B·Vb,3)
         was_training = teacher.training
         teacher.eval()
         try:
@@ -142,9 +133,9 @@ class PackRollouts(RolloutCache):
         for index, (identity, ours) in enumerate(zip(identities, torch.split(positions, batch.sizes, dim=1))):
             rise, gap = drift(ours, skinned[index])
             window, root = cut[index]
-            vertices, transforms = posed[index]
+            vertices, transforms, _ = posed[index]
             rollout = TeacherRollout(identity, self.geometry.build(identity), window.joint_rotations.to(self.device),
-                                     root.to(self.device), transforms, vertices, ours.float(),
+                                     root.to(self.device), transforms, vertices, ours,
                                      identity.garment.edges().to(self.device), window.name, step)
             made.append(rollout)
             too_high = self.config.max_rise > 0 and rise > self.config.max_rise
