@@ -171,3 +171,24 @@ def test_push_outside_moves_only_close_movable_points(sphere_proximity):
     after = proximity.query(pushed, max_distance=1.0).signed_distance
     assert bool((after[:2] > 1.5e-3).all())  # inside, and 0.5 mm out: both at the margin now
     assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable
+
+
+def test_a_query_split_over_threads_gives_the_same_answer(sphere):
+    """A CPU query of many points runs as several launches at once; each point's answer is its own."""
+    points = shell_points(3000, 0.5, 1.5, seed=3)
+    ranges = torch.linspace(0.01, 0.6, 3000)
+    answers = []
+    for threads in (1, 3):
+        proximity = BodyProximity(sphere[1], threads=threads)
+        proximity.update(sphere[0])
+        assert len(proximity._parts(3000)) == threads
+        answers.append(proximity.query(points, ranges))
+    one, split = answers
+    assert bool((one.face >= 0).any()) and bool((one.face < 0).any())  # some found, some out of range
+    for field in ("face", "point", "barycentric", "normal", "signed_distance"):
+        assert torch.equal(getattr(one, field), getattr(split, field)), field
+
+
+def test_threads_must_be_positive(sphere):
+    with pytest.raises(ValueError, match="threads"):
+        BodyProximity(sphere[1], threads=0)

@@ -147,3 +147,28 @@ def test_conv_runs_at_any_resolution_and_learns(resolution):
                        torch.randn(1, 4))
     out.sum().backward()
     assert model.refiner.out.weight.grad.abs().sum() > 0  # the zero-started layer gets a gradient
+
+
+def test_inference_copy_keeps_the_model_and_its_answer():
+    """``for_inference``: the shipped Conv-MLP channels-last gives the float32 answer; in bfloat16
+    it stays within a millimetre; the trained module itself is left as it was."""
+    from hyperbones.models.loading import hyperbones_payload, model_of
+
+    module_a = model_of(hyperbones_payload(None, "cpu"), "cpu").runtime
+    config = module_a.config
+    torch.manual_seed(4)
+    resolution = 24
+    inputs = (torch.randn(1, 3, resolution, resolution) * 0.3, torch.ones(1, 1, resolution, resolution),
+              torch.randn(1, config.uv_features, resolution, resolution), torch.randn(1, config.pose_embedding))
+    with torch.no_grad():
+        reference = module_a.refine(*inputs)
+        fast = module_a.for_inference("cpu").refine(*inputs)
+        half = module_a.for_inference("cpu", bfloat16=True).refine(*inputs)
+        again = module_a.refine(*inputs)
+    assert module_a.refiner.inp.weight.dtype == torch.float32 and module_a.refiner.inp.weight.is_contiguous()
+    assert torch.equal(again, reference)
+    assert reference.abs().max() > 1e-3  # the trained Conv-MLP displaces by millimetres or more
+    assert fast.dtype == half.dtype == torch.float32
+    assert (fast - reference).abs().max() < 1e-6
+    difference = (half - reference).abs()
+    assert 0 < difference.max() < 2e-3 and difference.pow(2).mean().sqrt() < 5e-4

