@@ -173,22 +173,24 @@ def test_push_outside_moves_only_close_movable_points(sphere_proximity):
     assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable
 
 
-def test_a_query_split_over_threads_gives_the_same_answer(sphere):
-    """A CPU query of many points runs as several launches at once; each point's answer is its own."""
-    points = shell_points(3000, 0.5, 1.5, seed=3)
-    ranges = torch.linspace(0.01, 0.6, 3000)
-    answers = []
-    for threads in (1, 3):
-        proximity = BodyProximity(sphere[1], threads=threads)
-        proximity.update(sphere[0])
-        assert len(proximity._parts(3000)) == threads
-        answers.append(proximity.query(points, ranges))
-    one, split = answers
-    assert bool((one.face >= 0).any()) and bool((one.face < 0).any())  # some found, some out of range
-    for field in ("face", "point", "barycentric", "normal", "signed_distance"):
-        assert torch.equal(getattr(one, field), getattr(split, field)), field
 
+def test_on_faces_remeasures_a_query_on_the_faces_it_found(sphere, sphere_proximity):
+    """Given the faces a search found, ``on_faces`` gives the search's record; given another
+    face, a distance no shorter than the nearest one."""
+    from hyperbones.geometry.surface import on_faces
 
-def test_threads_must_be_positive(sphere):
-    with pytest.raises(ValueError, match="threads"):
-        BodyProximity(sphere[1], threads=0)
+    vertices, faces = sphere
+    points = shell_points(400, 0.9, 1.1, seed=7).float()
+    found = sphere_proximity.query(points, 0.5)
+    assert bool(found.found.all())
+    again = on_faces(points, vertices.float(), faces, found.face, found.normal)
+    assert torch.equal(again.face, found.face)
+    assert torch.allclose(again.point, found.point, atol=1e-6)
+    assert torch.allclose(again.barycentric, found.barycentric, atol=1e-4)
+    assert torch.allclose(again.signed_distance, found.signed_distance, atol=1e-6)
+    radius = points.norm(dim=1)
+    clear = (radius < 0.99) | (radius > 1.001)  # the facets sag ~1 mm under the unit sphere
+    assert bool(((again.signed_distance < 0) == (radius < 0.99))[clear].all())  # inside, outside
+    other = (found.face + 1) % faces.shape[0]
+    elsewhere = on_faces(points, vertices.float(), faces, other, found.normal)
+    assert bool((elsewhere.point - points).norm(dim=1).ge(found.signed_distance.abs() - 1e-6).all())

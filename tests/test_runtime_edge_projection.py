@@ -65,3 +65,24 @@ def test_the_dense_solver_gives_the_sparse_solvers_answer():
     assert float(((dense[vertex] - planes.point) * planes.normal).sum(1).min()) > -1e-6  # planes held
     with pytest.raises(ParameterError, match="solver"):
         EdgeProjection(sheet, faces, solver="cholmod")
+
+
+def test_planes_one_per_vertex_are_applied_as_several_per_vertex_are():
+    """The in-place path for one plane a vertex gives the summed path's numbers, bit for bit."""
+    import numpy as np
+
+    from hyperbones.runtime.edge_projection import _onto_planes
+
+    rng = np.random.default_rng(5)
+    x = rng.normal(size=(200, 3)).astype(np.float32)
+    vertex = np.sort(rng.choice(200, 60, replace=False))
+    point = rng.normal(size=(60, 3)).astype(np.float32)
+    normal = rng.normal(size=(60, 3)).astype(np.float32)
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    one_each = _onto_planes(x, vertex, point, normal)
+    # The same planes plus one that never pushes, out of order: the summing path.
+    shuffled = np.concatenate([vertex[::-1], vertex[:1]])
+    summed = _onto_planes(x, shuffled, np.concatenate([point[::-1], x[vertex[:1]] - normal[:1]]),
+                          np.concatenate([normal[::-1], normal[:1]]))
+    assert (one_each != x).any(axis=1).sum() > 10  # some vertices were behind their plane
+    assert np.array_equal(one_each, summed)

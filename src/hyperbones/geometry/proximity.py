@@ -8,17 +8,12 @@ face it found (``geometry.surface``: ``signed_distance``, ``face_planes``, ``sur
 
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
-
 import torch
 import warp as wp
 
 from hyperbones.geometry.surface import Nearest, is_closed_surface
 
 SIGN_METHODS = ("auto", "normal", "winding")
-MIN_POINTS_PER_THREAD = 256  # below this a second launch costs more than it saves (~0.1 ms a launch)
-_POOL: ThreadPoolExecutor | None = None  # the threads CPU queries split over, made at first use
-_LOADED: set[str] = set()  # devices the kernel has run on: its first launch (the module's load) runs alone
 
 
 @wp.kernel
@@ -68,17 +63,12 @@ class BodyProximity:
         outward winding: positive signed volume), so it gets "normal".
     On the Anny body the two differ mostly around the eyes, where the separate eyeball and
     mouth shells make the winding number call the socket "inside" while the pseudo-normal
-    follows the nearest face. Warp's CPU kernels run on one thread, so on the CPU a query of
-    many points is split into ``threads`` launches that run at once (Warp releases the GIL;
-    each point's answer is its own, so the split changes nothing); on CUDA a query is one
+    follows the nearest face. Warp's CPU kernels run on one thread; on CUDA a query is one
     kernel launch. Agreement and costs: docs/experiments/*-body-proximity-sign.md.
     """
 
-    def __init__(self, faces: torch.Tensor, device: str | torch.device | None = "cpu", sign: str = "auto",
-                 threads: int | None = None):
-        """faces: (F,3) body triangles (counter-clockwise seen from outside); device: where Warp runs
-        (None: faces' device); threads: CPU threads a query splits over (None: torch's intra-op
-        threads, ``torch.get_num_threads()``, read at each query)."""
+    def __init__(self, faces: torch.Tensor, device: str | torch.device | None = "cpu", sign: str = "auto"):
+        """faces: (F,3) body triangles (counter-clockwise seen from outside); device: where Warp runs (None: faces' device)."""
         from hyperbones.geometry.warp_setup import init_warp_quietly
 
         if sign not in SIGN_METHODS:
@@ -92,9 +82,6 @@ class BodyProximity:
         self._indices = self.faces.to(torch.int32).reshape(-1).contiguous()
         self._points: torch.Tensor | None = None  # Warp's mesh reads this memory in place
         self._mesh: wp.Mesh | None = None
-        if threads is not None and threads < 1:
-            raise ValueError(f"threads must be >= 1, got {threads}")
-        self.threads = threads
 
     def update(self, body_vertices: torch.Tensor) -> None:
         """Move the body to ``body_vertices`` (Vb,3): builds the BVH the first time, then refits it."""
@@ -139,15 +126,17 @@ class BodyProximity:
         else:
             ranges = torch.full((count,), float(max_distance), dtype=torch.float32, device=self.device)
         if count:
-            outputs = (face, barycentric, closest, normal, signed)
-            parts = self._parts(count)
-            if len(parts) == 1:
-                self._launch(queries, ranges, outputs)
-            else:
-                pool = _thread_pool()
-                for job in [pool.submit(self._launch, queries[part], ranges[part], [out[part] for out in outputs])
-                            for part in parts]:
-                    job.result()
+            stream = wp.stream_from_torch(self.device) if self.device.type == "cuda" else None
+            wp.launch(
+                _nearest,
+                dim=count,
+                inputs=[self._mesh.id, _vec3(queries), wp.from_torch(ranges), int(self.sign == "winding")],
+                outputs=[wp.from_torch(face), _vec3(barycentric), _vec3(closest), _vec3(normal), wp.from_torch(signed)],
+                device=wp.device_from_torch(self.device),
+                stream=stream,
+            )
+            if stream is None:
+                wp.synchronize_device("cpu")
         out = dict(device=points.device, dtype=points.dtype if points.is_floating_point() else torch.float32)
         lead = points.shape[:-1]
         return Nearest(
@@ -157,41 +146,6 @@ class BodyProximity:
             normal=normal.to(**out).reshape(*lead, 3),
             signed_distance=signed.to(**out).reshape(lead),
         )
-
-    def _parts(self, count: int) -> list[slice]:
-        """The row ranges one query of ``count`` points is split into (one on CUDA)."""
-        threads = self.threads or torch.get_num_threads()
-        if self.device.type != "cpu" or str(self.device) not in _LOADED:
-            return [slice(0, count)]
-        pieces = max(1, min(threads, count // MIN_POINTS_PER_THREAD))
-        bounds = [count * k // pieces for k in range(pieces + 1)]
-        return [slice(start, stop) for start, stop in zip(bounds[:-1], bounds[1:])]
-
-    def _launch(self, queries: torch.Tensor, ranges: torch.Tensor, outputs) -> None:
-        """One kernel launch over (P,3) ``queries`` and their (P,) ``ranges``, writing ``outputs``
-        (face, barycentric, closest, normal, signed distance; rows of the query's tensors)."""
-        face, barycentric, closest, normal, signed = outputs
-        stream = wp.stream_from_torch(self.device) if self.device.type == "cuda" else None
-        wp.launch(
-            _nearest,
-            dim=queries.shape[0],
-            inputs=[self._mesh.id, _vec3(queries), wp.from_torch(ranges), int(self.sign == "winding")],
-            outputs=[wp.from_torch(face), _vec3(barycentric), _vec3(closest), _vec3(normal), wp.from_torch(signed)],
-            device=wp.device_from_torch(self.device),
-            stream=stream,
-        )
-        if stream is None:
-            wp.synchronize_device("cpu")
-        _LOADED.add(str(self.device))
-
-
-def _thread_pool() -> ThreadPoolExecutor:
-    """The process's pool for split CPU queries (its size grows with the threads asked for)."""
-    global _POOL
-    wanted = max(2, torch.get_num_threads())
-    if _POOL is None or _POOL._max_workers < wanted:
-        _POOL = ThreadPoolExecutor(wanted, thread_name_prefix="proximity")
-    return _POOL
 
 
 def _vec3(tensor: torch.Tensor) -> wp.array:

@@ -163,6 +163,12 @@ def _onto_planes(x: np.ndarray, vertex: np.ndarray, point: np.ndarray, normal: n
     planes gets the sum of their corrections, as there."""
     gap = np.einsum("ij,ij->i", x[vertex] - point, normal)
     push = np.maximum(-gap, 0.0)[:, None] * normal  # (C,3)
+    if len(vertex) < 2 or bool((vertex[1:] > vertex[:-1]).all()):
+        # One plane a vertex (the runtime's: one per nearest face, in vertex order): added in
+        # place, the same numbers as the sum below at a fifth of its cost.
+        out = x.copy()
+        out[vertex] += push
+        return out
     count = x.shape[0]
     correction = np.stack([np.bincount(vertex, weights=push[:, k], minlength=count) for k in range(3)], axis=1)
     return x + correction.astype(x.dtype)

@@ -107,11 +107,15 @@ class BodyContact:
                 skin = self.skin_now(index, body)
                 queried_at = garment  # (V,3) where each row of ``nearest`` was searched from
                 garment, nearest = self._push_out(proximity, garment, config.query_distance, skin)
-                searched = config.query_distance  # how far every search looked
             if neighbours is not None:
                 with clock.stage("untangling"):
                     garment, nearest, queried_at = self._untangle(proximity, *neighbours, garment, nearest,
                                                                   queried_at)
+            # (V,) how far each vertex certainly was from the skin where it was searched from:
+            # its distance, or the search's range where none was found (every search so far
+            # looked ``query_distance`` far); negative inside.
+            floor = torch.where(nearest.found, nearest.signed_distance,
+                                torch.full_like(nearest.signed_distance, config.query_distance))
             for _ in range(config.contact_rounds if projection is not None else 0):
                 with clock.stage("projection"):
                     planes = ContactPlanes.nearest(nearest, nearest.signed_distance < config.plane_reach, self.margin)
@@ -119,9 +123,8 @@ class BodyContact:
                 # The projection moves vertices away from the skin planes too; what it moved
                 # inside comes out again.
                 with clock.stage("contact queries"):
-                    garment, nearest, queried_at = self._search_again(proximity, garment, nearest, queried_at,
-                                                                      searched)
-                    searched = config.round_query_distance
+                    garment, nearest, queried_at, floor = self._search_again(proximity, garment, nearest,
+                                                                             queried_at, floor, body)
             self.last_nearest[index], self._skin_now[index] = nearest, None
             out.append(garment)
         return out
@@ -152,32 +155,44 @@ class BodyContact:
         return (garment.index_copy(0, moved, pushed), nearest.with_rows(moved, found),
                 queried_at.index_copy(0, moved, garment[moved]))
 
-    def _search_again(self, proximity, garment: torch.Tensor, nearest, queried_at: torch.Tensor, searched: float):
+    def _search_again(self, proximity, garment: torch.Tensor, nearest, queried_at: torch.Tensor,
+                      floor: torch.Tensor, body: torch.Tensor):
         """The push-out after a projection round, searching only where the answer can have
-        changed: (V,3) garment, the ``Nearest`` found from ``queried_at`` (V,3) on this body
-        within ``searched`` -> (garment pushed out, the nearest skin of each vertex, where each
-        was searched from).
+        changed: (V,3) garment, the ``Nearest`` of each vertex, (V,3) where each was measured
+        from and (V,) how far from the skin it certainly was there (``floor``), on the posed
+        body (Vb,3) -> the same four after the push-out.
 
-        A vertex found outside at distance d that moved by s since is still outside, at least
-        d − s from the body; one with no face within ``searched`` is at least ``searched`` − s
-        away. Where that bound exceeds this search's range (``config.round_query_distance``) the
-        search would find nothing that matters: the vertex keeps its record, which beyond the
-        range no later step reads (the follow and the planes look nearer), so the output is
-        that of searching every vertex. (Skipping vertices nearer than the range, with a stale
-        face, was measured and rejected: docs/experiments/2026-11-28-realtime-runtime.md.)
+        A vertex at least f from the skin that moved by s since is at least f − s away now.
+        Where that exceeds this search's range (``config.round_query_distance``) the search
+        would find nothing that matters: the vertex keeps its record, which beyond the range no
+        later step reads (the follow and the planes look nearer). Where it exceeds only
+        ``config.round_search_reach`` the vertex keeps its face, re-measured from where it is
+        now (``geometry.surface.on_faces``). With the reach at the range, the output is that of
+        searching every vertex. (Keeping the stale skin point too was measured and rejected:
+        docs/experiments/2026-11-28-realtime-runtime.md.)
         """
         config = self.config
         shift = (garment - queried_at).norm(dim=1)
-        # Only a vertex found outside can be certified clear: one found inside stays inside
-        # however far it is from the surface, and must be pushed out.
-        clear = torch.where(nearest.found, nearest.signed_distance - shift, torch.full_like(shift, searched) - shift)
-        search = (clear <= config.round_query_distance).nonzero().squeeze(1)
+        clear = floor - shift  # negative: maybe inside, searched however far from the surface
+        reach = min(config.round_search_reach, config.round_query_distance)
+        in_range = clear <= config.round_query_distance
+        search = ((clear <= reach) | (in_range & ~nearest.found)).nonzero().squeeze(1)
+        kept = ((clear > reach) & in_range & nearest.found).nonzero().squeeze(1)
+        if len(kept):
+            from hyperbones.geometry.surface import on_faces
+
+            nearest = nearest.with_rows(kept, on_faces(garment[kept], body, proximity.faces, nearest.face[kept],
+                                                       nearest.normal[kept]))
+            queried_at = queried_at.index_copy(0, kept, garment[kept])
+            floor = floor.index_copy(0, kept, clear[kept])
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        _skin_points(nearest)[search])
-        # The rest keep their record as it was found from where it was searched (``queried_at``),
-        # which is what bounds their distance in the next round.
+        found_floor = torch.where(found.found, found.signed_distance,
+                                  torch.full_like(found.signed_distance, config.round_query_distance))
+        # The rest keep their record as it was measured from ``queried_at``, which is what
+        # bounds their distance in the next round.
         return (garment.index_copy(0, search, pushed), nearest.with_rows(search, found),
-                queried_at.index_copy(0, search, garment[search]))
+                queried_at.index_copy(0, search, garment[search]), floor.index_copy(0, search, found_floor))
 
     def _push_out(self, proximity, garment: torch.Tensor, query_distance: float, skin: torch.Tensor | None = None):
         """(V,3) -> (V,3) with every vertex inside the body or within the margin moved out to
