@@ -173,24 +173,3 @@ def test_push_outside_moves_only_close_movable_points(sphere_proximity):
     assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable
 
 
-
-def test_on_faces_remeasures_a_query_on_the_faces_it_found(sphere, sphere_proximity):
-    """Given the faces a search found, ``on_faces`` gives the search's record; given another
-    face, a distance no shorter than the nearest one."""
-    from hyperbones.geometry.surface import on_faces
-
-    vertices, faces = sphere
-    points = shell_points(400, 0.9, 1.1, seed=7).float()
-    found = sphere_proximity.query(points, 0.5)
-    assert bool(found.found.all())
-    again = on_faces(points, vertices.float(), faces, found.face, found.normal)
-    assert torch.equal(again.face, found.face)
-    assert torch.allclose(again.point, found.point, atol=1e-6)
-    assert torch.allclose(again.barycentric, found.barycentric, atol=1e-4)
-    assert torch.allclose(again.signed_distance, found.signed_distance, atol=1e-6)
-    radius = points.norm(dim=1)
-    clear = (radius < 0.99) | (radius > 1.001)  # the facets sag ~1 mm under the unit sphere
-    assert bool(((again.signed_distance < 0) == (radius < 0.99))[clear].all())  # inside, outside
-    other = (found.face + 1) % faces.shape[0]
-    elsewhere = on_faces(points, vertices.float(), faces, other, found.normal)
-    assert bool((elsewhere.point - points).norm(dim=1).ge(found.signed_distance.abs() - 1e-6).all())

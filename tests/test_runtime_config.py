@@ -24,7 +24,6 @@ CHANGED = {
     "contact_margin": 0.006,
     "query_distance": 0.02,
     "round_query_distance": 0.015,
-    "round_search_reach": 0.005,
     "push_rounds": 1,
     "plane_reach": 0.01,
     "contact_rounds": 1,

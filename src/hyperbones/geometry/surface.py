@@ -120,28 +120,6 @@ def closest_points_on_faces(
 
 
 
-def on_faces(points: torch.Tensor, body_vertices: torch.Tensor, faces: torch.Tensor, face: torch.Tensor,
-             normal: torch.Tensor) -> Nearest:
-    """The ``Nearest`` record of (N,3) points if their nearest faces were ``face`` (N,), all
-    found, on the body ``body_vertices`` (Vb,3) with triangles ``faces`` (F,3): each point's
-    closest point on its face, that point's barycentric weights, the given unit face normals
-    (N,3) and the distance, signed by the face's plane. Cheaper than a search where the faces
-    are known to be right or near enough (a point that moved a little since its search)."""
-    closest = closest_points_on_faces(points, body_vertices, faces, face)
-    corners = faces[face].to(body_vertices.device)
-    a, b, c = (body_vertices[corners[:, k]].to(points) for k in range(3))
-    ab, ac, aq = b - a, c - a, closest - a
-    d00, d01, d11 = (ab * ab).sum(-1), (ab * ac).sum(-1), (ac * ac).sum(-1)
-    d20, d21 = (aq * ab).sum(-1), (aq * ac).sum(-1)
-    denominator = d00 * d11 - d01 * d01
-    denominator = torch.where(denominator.abs() > 0, denominator, torch.ones_like(denominator))
-    v, w = (d11 * d20 - d01 * d21) / denominator, (d00 * d21 - d01 * d20) / denominator
-    offset = points - closest
-    sign = torch.where((offset * normal).sum(-1) < 0, -1.0, 1.0).to(points)
-    return Nearest(face, closest, torch.stack([1 - v - w, v, w], dim=-1), normal.to(points),
-                   sign * offset.norm(dim=-1))
-
-
 def signed_distance(
     points: torch.Tensor, body_vertices: torch.Tensor, faces: torch.Tensor, face: torch.Tensor
 ) -> torch.Tensor:

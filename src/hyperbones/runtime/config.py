@@ -58,11 +58,6 @@ class RuntimeConfig:
     round_query_distance: float = 0.04
     """The same after a projection round, which moves vertices by millimetres (a nearer bound lets
     the BVH skip the far cloth)."""
-    round_search_reach: float = 0.04
-    """After a projection round, vertices that may now lie within this of the skin are searched
-    again; those certainly farther (up to ``round_query_distance``) keep their face with the
-    closest point on it re-measured, a search's answer wherever that face is still the nearest
-    (at ``round_query_distance`` or more: every vertex in range is searched)."""
     push_rounds: int = 4
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
     inside the next one."""
@@ -106,8 +101,8 @@ class RuntimeConfig:
         if not 0.0 <= self.follow_near < self.follow_far:
             raise ParameterError(f"runtime follow_near={self.follow_near!r} and follow_far={self.follow_far!r} "
                                  "must satisfy 0 <= follow_near < follow_far")
-        for name in ("contact_margin", "query_distance", "round_query_distance", "round_search_reach",
-                     "plane_reach", "projection_anchor"):
+        for name in ("contact_margin", "query_distance", "round_query_distance", "plane_reach",
+                     "projection_anchor"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
         if self.uv_resolution != 0 and not 8 <= self.uv_resolution <= MAX_UV_RESOLUTION:

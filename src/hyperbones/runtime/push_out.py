@@ -124,7 +124,7 @@ class BodyContact:
                 # inside comes out again.
                 with clock.stage("contact queries"):
                     garment, nearest, queried_at, floor = self._search_again(proximity, garment, nearest,
-                                                                             queried_at, floor, body)
+                                                                             queried_at, floor)
             self.last_nearest[index], self._skin_now[index] = nearest, None
             out.append(garment)
         return out
@@ -156,35 +156,23 @@ class BodyContact:
                 queried_at.index_copy(0, moved, garment[moved]))
 
     def _search_again(self, proximity, garment: torch.Tensor, nearest, queried_at: torch.Tensor,
-                      floor: torch.Tensor, body: torch.Tensor):
+                      floor: torch.Tensor):
         """The push-out after a projection round, searching only where the answer can have
         changed: (V,3) garment, the ``Nearest`` of each vertex, (V,3) where each was measured
-        from and (V,) how far from the skin it certainly was there (``floor``), on the posed
-        body (Vb,3) -> the same four after the push-out.
+        from and (V,) how far from the skin it certainly was there (``floor``) -> the same four
+        after the push-out.
 
         A vertex at least f from the skin that moved by s since is at least f − s away now.
         Where that exceeds this search's range (``config.round_query_distance``) the search
         would find nothing that matters: the vertex keeps its record, which beyond the range no
-        later step reads (the follow and the planes look nearer). Where it exceeds only
-        ``config.round_search_reach`` the vertex keeps its face, re-measured from where it is
-        now (``geometry.surface.on_faces``). With the reach at the range, the output is that of
-        searching every vertex. (Keeping the stale skin point too was measured and rejected:
-        docs/experiments/2026-11-28-realtime-runtime.md.)
+        later step reads (the follow and the planes look nearer), so the output is that of
+        searching every vertex. (Skipping vertices nearer than the range, with their stale face
+        or their face re-measured, was measured and rejected: docs/experiments/*-realtime-runtime*.md.)
         """
         config = self.config
         shift = (garment - queried_at).norm(dim=1)
         clear = floor - shift  # negative: maybe inside, searched however far from the surface
-        reach = min(config.round_search_reach, config.round_query_distance)
-        in_range = clear <= config.round_query_distance
-        search = ((clear <= reach) | (in_range & ~nearest.found)).nonzero().squeeze(1)
-        kept = ((clear > reach) & in_range & nearest.found).nonzero().squeeze(1)
-        if len(kept):
-            from hyperbones.geometry.surface import on_faces
-
-            nearest = nearest.with_rows(kept, on_faces(garment[kept], body, proximity.faces, nearest.face[kept],
-                                                       nearest.normal[kept]))
-            queried_at = queried_at.index_copy(0, kept, garment[kept])
-            floor = floor.index_copy(0, kept, clear[kept])
+        search = (clear <= config.round_query_distance).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        _skin_points(nearest)[search])
         found_floor = torch.where(found.found, found.signed_distance,
