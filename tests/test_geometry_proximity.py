@@ -171,5 +171,3 @@ def test_push_outside_moves_only_close_movable_points(sphere_proximity):
     after = proximity.query(pushed, max_distance=1.0).signed_distance
     assert bool((after[:2] > 1.5e-3).all())  # inside, and 0.5 mm out: both at the margin now
     assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable
-
-

@@ -119,7 +119,6 @@ def closest_points_on_faces(
     return torch.where((d1 <= 0) & (d2 <= 0), a, result)
 
 
-
 def signed_distance(
     points: torch.Tensor, body_vertices: torch.Tensor, faces: torch.Tensor, face: torch.Tensor
 ) -> torch.Tensor:

@@ -264,10 +264,10 @@ class ModuleA(nn.Module):
 
     def for_inference(self, device: str | torch.device = "cpu", bfloat16: bool = False) -> "ModuleA":
         """A copy for the per-frame runtime: on ``device``, in eval mode, the Conv-MLP's weights
-        channels-last (the layout oneDNN's CPU convolutions and GPUs' tensor cores run fastest:
-        ~8 % less time at 48² on the 2-core CPU) and, with ``bfloat16``, in bfloat16 (its inputs
-        follow in ``refine``: half the time again where the processor has bfloat16 units, at
-        ~0.5 mm of displacement). The copy leaves this module as it is."""
+        channels-last (the layout oneDNN's CPU convolutions and GPUs' tensor cores run fastest)
+        and, with ``bfloat16``, in bfloat16 (``refine`` casts its inputs to match). The copy
+        leaves this module, which training may still update, as it is. Timings:
+        docs/experiments/*-realtime-runtime-2.md."""
         runtime = copy.deepcopy(self).to(device).eval()
         if runtime.refiner is not None:
             runtime.refiner.to(memory_format=torch.channels_last)
