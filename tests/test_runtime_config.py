@@ -2,6 +2,7 @@
 read by the runtime (no module constant), and overridable with ``--runtime``."""
 
 import json
+import math
 from dataclasses import fields, replace
 
 import pytest
@@ -152,3 +153,27 @@ def test_overrides_parse_and_bad_ones_are_one_line_errors():
 def test_cli_refuses_a_bad_runtime_before_any_work(capsys):
     assert main(["eval", "--methods", "hyperbones", "--runtime", "contact_rounds=-1", "--out", "/nonexistent/x"]) == 2
     assert "hyperbones: error: --runtime: runtime contact_rounds=-1 must be in [0, 64]" in capsys.readouterr().err
+
+
+def test_searching_again_only_where_it_matters_is_searching_everywhere(walk, default_walk, monkeypatch):
+    """After a projection round the runtime searches only the vertices that may lie within range
+    (``BodyContact._search_again``); searching every vertex gives the same garment, bit for bit."""
+    from hyperbones.runtime.push_out import BodyContact
+
+    original = BodyContact._search_again
+    skipped = []
+
+    def counted(self, proximity, garment, nearest, queried_at, floor):
+        clear = floor - (garment - queried_at).norm(dim=1)
+        skipped.append(int((clear > self.config.round_query_distance).sum()))
+        return original(self, proximity, garment, nearest, queried_at, floor)
+
+    monkeypatch.setattr(BodyContact, "_search_again", counted)
+    assert torch.equal(_run(walk, RuntimeConfig()), default_walk)
+    assert sum(skipped) > 0  # the dress's loose skirt is skipped somewhere
+
+    def everywhere(self, proximity, garment, nearest, queried_at, floor):
+        return original(self, proximity, garment, nearest, queried_at, torch.full_like(floor, -math.inf))
+
+    monkeypatch.setattr(BodyContact, "_search_again", everywhere)
+    assert torch.equal(_run(walk, RuntimeConfig()), default_walk)
