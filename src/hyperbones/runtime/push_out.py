@@ -111,11 +111,8 @@ class BodyContact:
                 with clock.stage("untangling"):
                     garment, nearest, queried_at = self._untangle(proximity, *neighbours, garment, nearest,
                                                                   queried_at)
-            # (V,) how far each vertex certainly was from the skin where it was searched from:
-            # its distance, or the search's range where none was found (every search so far
-            # looked ``query_distance`` far); negative inside.
-            floor = torch.where(nearest.found, nearest.signed_distance,
-                                torch.full_like(nearest.signed_distance, config.query_distance))
+            # Every search so far looked ``query_distance`` far.
+            floor = _distance_floor(nearest, config.query_distance)
             for _ in range(config.contact_rounds if projection is not None else 0):
                 with clock.stage("projection"):
                     planes = ContactPlanes.nearest(nearest, nearest.signed_distance < config.plane_reach, self.margin)
@@ -175,12 +172,12 @@ class BodyContact:
         search = (clear <= config.round_query_distance).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        _skin_points(nearest)[search])
-        found_floor = torch.where(found.found, found.signed_distance,
-                                  torch.full_like(found.signed_distance, config.round_query_distance))
+        found_floor = _distance_floor(found, config.round_query_distance)
         # The rest keep their record as it was measured from ``queried_at``, which is what
         # bounds their distance in the next round.
         return (garment.index_copy(0, search, pushed), nearest.with_rows(search, found),
-                queried_at.index_copy(0, search, garment[search]), floor.index_copy(0, search, found_floor))
+                queried_at.index_copy(0, search, garment[search]),
+                floor.index_copy(0, search, found_floor))
 
     def _push_out(self, proximity, garment: torch.Tensor, query_distance: float, skin: torch.Tensor | None = None):
         """(V,3) -> (V,3) with every vertex inside the body or within the margin moved out to
@@ -210,6 +207,12 @@ class BodyContact:
             garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
             moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
         return garment, nearest
+
+
+def _distance_floor(nearest, searched: float) -> torch.Tensor:
+    """(V,) how far each point of a query that looked ``searched`` far certainly is from the
+    skin: its signed distance (negative inside), or ``searched`` where it found no face."""
+    return torch.where(nearest.found, nearest.signed_distance, torch.full_like(nearest.signed_distance, searched))
 
 
 def _skin_points(nearest) -> torch.Tensor:

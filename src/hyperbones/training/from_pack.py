@@ -144,6 +144,7 @@ def main(argv: list[str] | None = None) -> int:
                              "15 seconds unless --minutes says otherwise")
     args = parser.parse_args(argv)
 
+    from hyperbones.devices import pick_device
     from hyperbones.errors import HyperbonesError
     from hyperbones.training.config import HyperBonesTrainingConfig, apply_overrides, load_config
     from hyperbones.training.pack import QUICK_DATA
@@ -159,7 +160,7 @@ def main(argv: list[str] | None = None) -> int:
         if args.device:
             config = apply_overrides(config, [f"train.device={args.device}"])
         pack = TrainingPack(args.pack)
-        cuda = config.train.device.startswith("cuda") or (config.train.device == "auto" and torch.cuda.is_available())
+        cuda = pick_device(config.train.device).type == "cuda"
         batch = args.batch or (64 if cuda else 4)
         rollout_batch = args.rollout_batch or (64 if cuda else 4)
         trainer = trainer_for(config, args.out, pack, batch=batch, rollout_batch=rollout_batch, resume=args.resume,

@@ -15,6 +15,7 @@ from __future__ import annotations
 import torch
 
 from hyperbones.errors import ParameterError
+from hyperbones.geometry.batched_proximity import BatchedProximity
 from hyperbones.geometry.surface import push_outside
 from hyperbones.geometry.torch_proximity import TorchProximity
 from hyperbones.geometry.uv_raster import UvRaster
@@ -26,7 +27,7 @@ from hyperbones.rig.virtual_bones import VirtualBones, bone_joint_weights, initi
 from hyperbones.runtime.identity import IdentityGeometry
 from hyperbones.training.config import JointConfig
 from hyperbones.training.episode import Identity
-from hyperbones.training.episode_batch import BatchedProximity, EpisodeBatch
+from hyperbones.training.episode_batch import EpisodeBatch
 from hyperbones.training.pack_data import PackData
 from hyperbones.training.rollouts import RolloutCache, TeacherRollout, drift
 

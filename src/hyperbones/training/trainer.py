@@ -42,6 +42,7 @@ from hyperbones.training.checkpoint import load_optimizer_state, save_training_s
 from hyperbones.training.config import TeacherTrainingConfig
 from hyperbones.training.loss import collision_weight_at, physics_terms
 
+
 @dataclass
 class EpisodeRun:
     """What the steps of the current episode (or batch of episodes, as one garment) read.
