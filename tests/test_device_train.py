@@ -81,14 +81,19 @@ def test_a_run_never_writes_over_an_earlier_state(prepared, tmp_path):
 
 
 FAKE_TRAINER = textwrap.dedent("""
-    import argparse, pathlib
+    import argparse, os, pathlib
     parser = argparse.ArgumentParser()
     for name in ("--pack", "--config", "--out", "--minutes", "--device", "--checkpoint-minutes", "--files"):
         parser.add_argument(name)
     parser.add_argument("--resume", action="store_true")
     parser.add_argument("--quick", action="store_true")
+    parser.add_argument("--smoke", action="store_true")
     args = parser.parse_args()
     out = pathlib.Path(args.out)
+    if args.smoke:
+        (out / "smoke.pt").write_bytes(b"x")
+        print(f"smoke step on {args.device}")
+        raise SystemExit(int(os.environ.get("SMOKE_EXIT", "0")))
     step = int((out / "step.txt").read_text()) if args.resume else 0
     for index in range(int(args.files or 2) - 1):
         (out / f"part{index}.pt").write_bytes(b"x")
@@ -109,6 +114,8 @@ def test_a_run_resumes_the_committed_state_and_says_what_comes_back(tmp_path, mo
     assert run(out=tmp_path / "call1", **common) == 0
     log = (tmp_path / "call1" / "train.log").read_text()
     assert "a fresh run" in log and "step 0 -> 10" in log and "commit it:" in log
+    assert log.index("smoke step on cpu") < log.index("smoke check passed") < log.index("step 0 -> 10")
+    assert not (tmp_path / "call1" / "state" / "smoke.pt").exists()  # the smoke's folder is a scratch one
     committed.parent.mkdir()
     (tmp_path / "call1" / "state").rename(committed)
     assert has_state(committed)
@@ -118,6 +125,17 @@ def test_a_run_resumes_the_committed_state_and_says_what_comes_back(tmp_path, mo
     assert (committed / "step.txt").read_text() == "10"  # the committed state is read, never written
     assert run(out=tmp_path / "call3", extra=["--files", "7"], **common) == 3
     assert "WILL NOT COME BACK WHOLE: 7 files, over 6" in (tmp_path / "call3" / "train.log").read_text()
+
+
+def test_a_failing_smoke_check_stops_the_job_before_the_run(tmp_path, monkeypatch):
+    (tmp_path / "fake_trainer.py").write_text(FAKE_TRAINER)
+    monkeypatch.setenv("PYTHONPATH", f"{tmp_path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}")
+    monkeypatch.setenv("SMOKE_EXIT", "1")
+    assert run("configs/teacher.toml", tmp_path / "teacher.pack.pt", tmp_path / "committed", tmp_path / "call",
+               "cpu", 0.25, trainer="fake_trainer") == 1
+    log = (tmp_path / "call" / "train.log").read_text()
+    assert "the smoke check failed (exit 1)" in log and "step 0 -> 10" not in log
+    assert not any((tmp_path / "call" / "state").iterdir())
 
 
 def test_returned_problems(tmp_path):

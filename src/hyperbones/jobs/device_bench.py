@@ -19,10 +19,13 @@ import argparse
 import shutil
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import torch
+
+from hyperbones.io_utils import atomic_path
 
 VERTICES = (2500, 5000, 8000)
 RESOLUTIONS = (64, 128, 512)  # 512: the paper's
@@ -86,9 +89,10 @@ def copy_package(name: str, site: str | Path) -> Path:
 
 
 def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: int = 30,
-        warmup: int = 10) -> list[DeviceRow]:
+        warmup: int = 10, on_row: Callable[[list[DeviceRow]], None] | None = None) -> list[DeviceRow]:
     """Time every prepared identity (largest last); ``quick``: the smallest one only, 64², batches
-    1 and 2, float32, a few frames (the suite's check that the job runs)."""
+    1 and 2, float32, a few frames (the suite's check that the job runs). ``on_row`` gets the
+    rows so far after each one (so a call cut short still returns what it measured)."""
     from hyperbones.body.rig import BodyRig
     from hyperbones.jobs.timing import timed_blocks
     from hyperbones.models.loading import hyperbones_payload, load_module_a
@@ -147,6 +151,8 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
                         torch.cuda.empty_cache()
                 rows.append(row)
                 print(_row_line(row), flush=True)
+                if on_row is not None:
+                    on_row(rows)
     return rows
 
 
@@ -197,12 +203,14 @@ def main(argv: list[str] | None = None) -> int:
             print(path)
         return 0
     print(HEADER, flush=True)
-    rows = run(args.folder, args.device, args.quick)
-    text = table(rows, torch.device(args.device))
-    if args.out:
-        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
-        Path(args.out).write_text(text + "\n")
-    print("\n" + text)
+
+    def write(rows: list[DeviceRow]) -> None:
+        if args.out:
+            with atomic_path(args.out) as staged:
+                staged.write_text(table(rows, torch.device(args.device)) + "\n")
+
+    rows = run(args.folder, args.device, args.quick, on_row=write)
+    print("\n" + table(rows, torch.device(args.device)))
     return 0
 
 

@@ -6,8 +6,10 @@ carries at most 64 MiB there (the repository's files and the paths it names), la
 goes in calls, its state committed between them:
 
 - ``prepare`` (here) writes the phase's training pack (``hyperbones pack``) and a copy of roma;
-- ``run`` (there) copies the run's committed state (``runs/device-<phase>/``) into
-  ``$OUT/state``, resumes the torch-only trainer (``training.from_pack``) on it for a few
+- ``run`` (there) first runs a few steps into a scratch folder (``--smoke``: short rollouts,
+  batches of 2), so that a step that cannot run on that device fails in seconds, not after
+  minutes of rollouts; then it copies the run's committed state (``runs/device-<phase>/``)
+  into ``$OUT/state``, resumes the torch-only trainer (``training.from_pack``) on it for a few
   minutes, checkpointing every minute so that a call cut short still brings back its last
   minute, logs to ``$OUT/train.log``, and ends with a summary: the TensorBoard log's medians
   (the log itself stays behind: each resume adds an event file, and ``$OUT`` brings back 8
@@ -24,6 +26,7 @@ import re
 import shutil
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 
@@ -143,24 +146,28 @@ def run(config: str, pack: str | Path, state: str | Path, out: str | Path, devic
     resume = has_state(state)
     if resume:
         shutil.copytree(state, work, dirs_exist_ok=True)
-    command = [sys.executable, "-m", trainer, "--pack", str(pack), "--config", config,
-               "--out", str(work), "--minutes", f"{minutes:g}", "--device", device, "--checkpoint-minutes", "1",
+    trainer_command = [sys.executable, "-m", trainer, "--pack", str(pack), "--config", config, "--device", device]
+    command = [*trainer_command, "--out", str(work), "--minutes", f"{minutes:g}", "--checkpoint-minutes", "1",
                *(["--resume"] if resume else []), *(["--quick"] if quick else []), *(extra or [])]
     log = out / "train.log"
     start = time.monotonic()
     with log.open("a") as sink:
         _say(sink, f"{time.strftime('%Y-%m-%d %H:%M:%S')} {config} on {device}: "
-                   f"{f'resuming {state}' if resume else 'a fresh run'}, {minutes:g} min\n$ {' '.join(command)}")
-        with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as process:
-            for line in process.stdout:
-                sys.stdout.write(line)
-                sink.write(line)
-                sink.flush()
+                   f"{f'resuming {state}' if resume else 'a fresh run'}, {minutes:g} min")
+        if not quick:  # --quick is itself this check
+            with tempfile.TemporaryDirectory() as scratch:
+                smoke = _stream([*trainer_command, "--out", scratch, "--smoke", *(extra or [])], sink)
+            if smoke:
+                _say(sink, f"\n== summary: the smoke check failed (exit {smoke}) after "
+                           f"{time.monotonic() - start:.0f} s; the run was not started")
+                return smoke
+            _say(sink, f"smoke check passed in {time.monotonic() - start:.0f} s")
+        returncode = _stream(command, sink)
         _say(sink, _log_summary(work / "tensorboard"))
         shutil.rmtree(work / "tensorboard", ignore_errors=True)  # summed up above; a new event file per call
         problems = returned_problems(work)
         files = sorted(f for f in work.rglob("*") if f.is_file())
-        lines = ["", f"== summary: trainer exit {process.returncode} after {time.monotonic() - start:.0f} s; "
+        lines = ["", f"== summary: trainer exit {returncode} after {time.monotonic() - start:.0f} s; "
                      f"{len(files)} state files, {sum(f.stat().st_size for f in files) / MIB:.1f} MiB in {work}"]
         lines += [f"   {f.relative_to(work)}  {f.stat().st_size / MIB:.2f} MiB" for f in files]
         lines += [f"   WILL NOT COME BACK WHOLE: {problem}" for problem in problems]
@@ -168,7 +175,18 @@ def run(config: str, pack: str | Path, state: str | Path, out: str | Path, devic
             lines.append(f"   commit it: rm -rf {state} && cp -r --no-preserve=mode FILES_AT/state {state} "
                          f"&& git add -A {state}")
         _say(sink, "\n".join(lines))
-    return process.returncode or (3 if problems else 0)
+    return returncode or (3 if problems else 0)
+
+
+def _stream(command: list[str], sink) -> int:
+    """Run ``command``, its output to stdout and ``sink`` line by line; its exit status."""
+    _say(sink, f"$ {' '.join(command)}")
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True) as process:
+        for line in process.stdout:
+            sys.stdout.write(line)
+            sink.write(line)
+            sink.flush()
+    return process.returncode
 
 
 def _log_summary(log_dir: Path) -> str:

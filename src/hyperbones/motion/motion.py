@@ -124,7 +124,7 @@ class Motion:
 
 def heading_angle(root_rotation: torch.Tensor) -> torch.Tensor:
     """(...,3,3) root rotation -> (...) yaw in radians of the facing direction (A-pose faces -Y: yaw 0)."""
-    facing = root_rotation @ torch.tensor([0.0, -1.0, 0.0], dtype=root_rotation.dtype)
+    facing = root_rotation @ torch.tensor([0.0, -1.0, 0.0], dtype=root_rotation.dtype, device=root_rotation.device)
     return torch.atan2(facing[..., 0], -facing[..., 1])
 
 

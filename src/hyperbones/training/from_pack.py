@@ -113,6 +113,7 @@ def trainer_for(config, run_dir, pack: TrainingPack, **options):
 QUICK_TRAINING = ("train.log_every=1", "train.rollout_start=2", "train.rollout_max=2", "train.rollout_ramp_steps=0")
 """``--quick``'s training settings (with ``training.pack.QUICK_DATA``); phase 2 adds ``QUICK_JOINT``."""
 QUICK_JOINT = ("joint.rollout_frames=6", "joint.cache_size=2", "joint.refresh_every=2", "joint.frames_per_step=1")
+SMOKE_STEPS = 3  # ``--smoke``: steps past the first rollouts and the first refresh
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,8 +140,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--set", action="append", default=None, metavar="SECTION.KEY=VALUE",
                         help="override one config field (as hyperbones train --set)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    parser.add_argument("--smoke", action="store_true",
+                        help="a check that a step runs on this pack and device: short rollouts, batches of 2, "
+                             f"{SMOKE_STEPS} steps (the GPU job runs it first, to fail in seconds, not minutes)")
     parser.add_argument("--quick", action="store_true",
-                        help="a check that the whole job runs: a --quick pack's data, short rollouts, batches of 2, "
+                        help="a check that the whole job runs: --smoke's settings on a --quick pack's data, "
                              "15 seconds unless --minutes says otherwise")
     args = parser.parse_args(argv)
 
@@ -150,13 +154,17 @@ def main(argv: list[str] | None = None) -> int:
     from hyperbones.training.pack import QUICK_DATA
 
     try:
-        overrides = [*(QUICK_DATA + QUICK_TRAINING if args.quick else ()), *(args.set or ())]
+        short = args.quick or args.smoke
+        overrides = [*(QUICK_DATA if args.quick else ()), *(QUICK_TRAINING if short else ()), *(args.set or ())]
         config = apply_overrides(load_config(args.config), overrides)
-        if args.quick and isinstance(config, HyperBonesTrainingConfig):
+        if short and isinstance(config, HyperBonesTrainingConfig):
             config = apply_overrides(config, QUICK_JOINT)
-        if args.quick:
+        if short:
             args.batch, args.rollout_batch = 2, 2
+        if args.quick:
             args.minutes = 0.25 if args.minutes is None else args.minutes
+        if args.smoke:
+            args.max_steps = SMOKE_STEPS
         if args.device:
             config = apply_overrides(config, [f"train.device={args.device}"])
         pack = TrainingPack(args.pack)

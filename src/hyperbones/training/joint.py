@@ -15,6 +15,7 @@ One process only (no DDP).
 from __future__ import annotations
 
 import os
+import time
 from pathlib import Path
 
 import torch
@@ -99,9 +100,12 @@ class JointTrainer(TeacherTrainer):
         if not self.cache.rollouts:
             if self.progress:
                 print("preparing teacher rollouts for Module A", flush=True)
+            started = time.perf_counter()
             # Loaded from a bank they are cheap: fill the whole cache at once.
             for _ in range(joint.cache_size if joint.bank else min(INITIAL_ROLLOUTS, joint.cache_size)):
                 self.cache.refresh(self.teacher, self.step)
+            if self.progress:
+                print(f"{len(self.cache.rollouts)} rollouts ready in {time.perf_counter() - started:.0f} s", flush=True)
         elif self.step % joint.refresh_every == 0:
             self.cache.refresh(self.teacher, self.step)  # grows until full, then replaces the oldest
         weight = collision_weight_at(self.step, self.config.train.collision_weight_start,
