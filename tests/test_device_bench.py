@@ -6,7 +6,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from hyperbones.jobs.device_bench import prepare
+from hyperbones.jobs.device_bench import prepare, run
 from hyperbones.models.loading import hyperbones_payload
 from hyperbones.runtime.simulator import runtime_config_of
 
@@ -30,6 +30,9 @@ def test_the_device_bench_runs_on_the_cpu(tmp_path, body):
                                                          (f"runtime @ {shipped}²", 1)]
     assert all(float(r[5]) > 0 and float(r[6]) > 0 for r in rows)
     assert float(rows[1][6]) <= float(rows[1][5])  # per character: the batch's frame shared by two
+    # Out of job time: every row is listed, none timed (the job ends in a known time).
+    late = run(folder, "cpu", quick=True, seconds=0.0)
+    assert len(late) == 3 and all(row.ms_per_frame is None and row.missing == "not timed (job time)" for row in late)
 
 
 def test_the_device_bench_says_what_is_missing(tmp_path):

@@ -7,7 +7,10 @@ what the per-frame runtime needs into one folder: the dress's identity caches at
 copy of ``roma`` (pure Python, missing there). ``run`` (there, or here with ``--cpu``) times
 Module A alone at several UV resolutions and the whole runtime (follow, contact with the torch
 search, edge projection with the dense solver on a GPU), batches of characters, float32 and
-bfloat16, and prints one table. ``scripts/device/bench.sh`` wraps both.
+bfloat16, and prints one table, rewritten after every row. A row's frames are fewer where its
+first frame is slow, and no row starts after 4 minutes: the first GPU call ran the 2.5k rows
+alone for 3 minutes (docs/experiments/2026-11-28-first-gpu-training-call.md).
+``scripts/device/bench.sh`` wraps both.
 
     python -m hyperbones.jobs.device_bench prepare --out .device/bench
     python -m hyperbones.jobs.device_bench run --folder .device/bench [--device cpu] [--quick]
@@ -32,6 +35,8 @@ RESOLUTIONS = (64, 128, 512)  # 512: the paper's
 BATCHES = (1, 64, 1024)
 RUNTIME_BATCHES = (1, 8)  # contact and projection still loop over characters
 GARMENT = "dress"
+ROW_SECONDS = 3.0  # the most a row's timed frames should take (its first frame says how many fit)
+JOB_SECONDS = 240.0  # no row starts after this: the issue gives the job 5 minutes on the GPU machine
 
 
 @dataclass
@@ -43,8 +48,9 @@ class DeviceRow:
     what: str
     batch: int
     dtype: str
-    ms_per_frame: float | None  # None: did not fit in memory
+    ms_per_frame: float | None  # None: not timed (``missing`` says why)
     ms_per_character: float | None
+    missing: str = "out of memory"
 
 
 def prepare(out: str | Path, vertices: tuple[int, ...] = VERTICES, garment: str = GARMENT) -> list[Path]:
@@ -89,12 +95,16 @@ def copy_package(name: str, site: str | Path) -> Path:
 
 
 def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: int = 30,
-        warmup: int = 10, on_row: Callable[[list[DeviceRow]], None] | None = None) -> list[DeviceRow]:
+        warmup: int = 10, on_row: Callable[[list[DeviceRow]], None] | None = None,
+        row_seconds: float = ROW_SECONDS, seconds: float = JOB_SECONDS) -> list[DeviceRow]:
     """Time every prepared identity (largest last); ``quick``: the smallest one only, 64², batches
     1 and 2, float32, a few frames (the suite's check that the job runs). ``on_row`` gets the
-    rows so far after each one (so a call cut short still returns what it measured)."""
+    rows so far after each one (so a call cut short still returns what it measured).
+
+    Each row times up to ``frames`` frames after up to ``warmup``, fewer where its first frame
+    says they would take more than ``row_seconds`` (at least 3 and 1); rows that would start
+    after ``seconds`` are listed as not timed, so the job ends in a known time."""
     from hyperbones.body.rig import BodyRig
-    from hyperbones.jobs.timing import timed_blocks
     from hyperbones.models.loading import hyperbones_payload, load_module_a
     from hyperbones.runtime.config import RAW, RuntimeConfig
     from hyperbones.runtime.identity import Identity
@@ -115,7 +125,7 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
     if quick:
         paths, resolutions, batches, runtime_batches, dtypes = paths[:1], (64,), (1, 2), (1,), (False,)
         frames, warmup = 3, 1
-    rows = []
+    rows, started = [], time.monotonic()
     for path in paths:
         identity = Identity.load(path)
         remade: dict[int, Identity] = {}
@@ -128,32 +138,50 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
             for bfloat16 in dtypes:
                 row = DeviceRow(GARMENT, identity.num_vertices, what, batch, "bf16" if bfloat16 else "fp32",
                                 None, None)
-                try:
-                    resolution = config.uv_resolution or identity.raster.resolution
-                    if resolution not in remade:  # once per resolution, not per batch and dtype
-                        remade[resolution] = identity.at_resolution(resolution)
-                    simulator = Simulator(module_a, [remade[resolution]] * batch, the_device,
-                                          body_faces=rig.faces if contact else None,
-                                          config=replace(config, bfloat16=bfloat16))
-
-                    def step(t: int, simulator=simulator, batch=batch, contact=contact) -> None:
-                        t = t % rotations.shape[0]
-                        simulator.step(rotations[t:t + 1].expand(batch, 31, 3, 3), roots[t:t + 1].expand(batch, 3),
-                                       bodies_at(t).expand(batch, -1, -1) if contact else None)
-
-                    block = timed_blocks(step, the_device, warmup, frames)[0]
-                    row.ms_per_frame, row.ms_per_character = block.median, block.median / batch
-                except torch.cuda.OutOfMemoryError:
-                    pass
-                finally:
-                    simulator = None
-                    if the_device.type == "cuda":
-                        torch.cuda.empty_cache()
+                if time.monotonic() - started > seconds:
+                    row.missing = "not timed (job time)"
+                else:
+                    try:
+                        resolution = config.uv_resolution or identity.raster.resolution
+                        if resolution not in remade:  # once per resolution, not per batch and dtype
+                            remade[resolution] = identity.at_resolution(resolution)
+                        simulator = Simulator(module_a, [remade[resolution]] * batch, the_device,
+                                              body_faces=rig.faces if contact else None,
+                                              config=replace(config, bfloat16=bfloat16))
+                        row.ms_per_frame = _median_ms(simulator, rotations, roots, bodies_at if contact else None,
+                                                      the_device, warmup, frames, row_seconds)
+                        row.ms_per_character = row.ms_per_frame / batch
+                    except torch.cuda.OutOfMemoryError:
+                        pass
+                    finally:
+                        simulator = None
+                        if the_device.type == "cuda":
+                            torch.cuda.empty_cache()
                 rows.append(row)
                 print(_row_line(row), flush=True)
                 if on_row is not None:
                     on_row(rows)
     return rows
+
+
+def _median_ms(simulator, rotations: torch.Tensor, roots: torch.Tensor, bodies_at, device: torch.device,
+               warmup: int, frames: int, row_seconds: float) -> float:
+    """Median ms of ``simulator``'s frames along the walk, its characters all in the same pose
+    (rotations (T,31,3,3), roots (T,3); ``bodies_at``: t -> (1,Vb,3) the posed body, None
+    without contact): up to ``frames`` frames after up to ``warmup``, fewer where the first
+    frame says they would take more than ``row_seconds``."""
+    from hyperbones.jobs.timing import timed_blocks
+
+    batch = len(simulator.identities)
+
+    def step(t: int) -> None:
+        t = t % rotations.shape[0]
+        simulator.step(rotations[t:t + 1].expand(batch, 31, 3, 3), roots[t:t + 1].expand(batch, 3),
+                       bodies_at(t).expand(batch, -1, -1) if bodies_at is not None else None)
+
+    first = timed_blocks(step, device, 1, 1)[0].median / 1000  # seconds, after one untimed frame
+    count = max(3, min(frames, int(row_seconds / max(first, 1e-9))))
+    return timed_blocks(step, device, max(1, min(warmup, count // 2)), count)[0].median
 
 
 def _bodies(rig, rotations: torch.Tensor, roots: torch.Tensor):
@@ -174,7 +202,7 @@ HEADER = ("| garment | vertices | what | batch | dtype | ms/frame (median) | ms 
 
 def _row_line(row: DeviceRow) -> str:
     def ms(value):
-        return "out of memory" if value is None else f"{value:.3f}"
+        return row.missing if value is None else f"{value:.3f}"
 
     return (f"| {row.garment} | {row.vertices} | {row.what} | {row.batch} | {row.dtype} | {ms(row.ms_per_frame)} | "
             f"{ms(row.ms_per_character)} |")
