@@ -156,3 +156,39 @@ def test_the_work_per_step_is_bounded_whatever_the_input(body, monkeypatch):
     assert 2 <= calls["limiter"] <= 1 + CONTACT_ROUNDS  # a second pass ran for the cloth left inside
     assert calls["query"] <= 2 + CONTACT_ROUNDS
     assert torch.isfinite(moved).all()
+
+
+def test_searches_bounded_by_known_skin_points_answer_as_the_full_ones(body, monkeypatch):
+    """constrain_step bounds every body search by a skin point it already knows (the one before
+    the step carried onto the body now, then each round's last answer): the step's result is
+    the one full-range searches give, with Warp's search and with the torch one."""
+    import hyperbones.physics.hard_contact as hard_contact
+    from hyperbones.geometry.torch_proximity import TorchProximity
+
+    v = body.rest_vertices
+    generator = torch.Generator().manual_seed(3)
+    torso = torch.nonzero((v[:, 2] > 0.9) & (v[:, 2] < 1.4)).squeeze(1)[::23][:150]
+    probe = BodyProximity(body.faces)
+    probe.update(v)
+    normal = probe.query(v[torso], max_distance=0.1).normal
+    offsets = torch.empty(len(torso), 1).uniform_(-0.03, 0.15, generator=generator)
+    positions = v[torso] + offsets * normal  # some inside, some near, some beyond the 10 cm searched
+    count = len(positions)
+    edges = torch.stack([torch.arange(count), torch.roll(torch.arange(count), 1)], dim=1)
+    limiter = StrainLimiter.build(edges, 0.9 * (positions[edges[:, 1]] - positions[edges[:, 0]]).norm(dim=-1),
+                                  torch.full((count,), 1e-3), torch.zeros(count, dtype=torch.bool))
+    body_before, body_after = v - torch.tensor([0.0, 0.01, 0.0]), v
+    movable = torch.ones(count, dtype=torch.bool)
+    for search in (BodyProximity, TorchProximity):
+        results = []
+        for bounded in (True, False):
+            if not bounded:
+                monkeypatch.setattr(hard_contact, "search_ranges", lambda points, skin, distance: distance)
+            proximity = search(body.faces)
+            proximity.update(body_before)
+            nearest_before = proximity.query(positions - torch.tensor([0.0, 0.01, 0.0]), max_distance=0.1)
+            assert nearest_before.found.any() and not nearest_before.found.all()
+            results.append(constrain_step(positions, torch.zeros_like(positions), limiter, proximity, nearest_before,
+                                          body_after, movable, MARGIN, 0.1)[0])
+        monkeypatch.undo()
+        assert torch.equal(results[0], results[1]), search.__name__

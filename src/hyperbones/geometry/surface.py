@@ -146,3 +146,20 @@ def push_outside(points: torch.Tensor, nearest: Nearest, margin: float, movable:
         close = close & movable
     moved = nearest.point + margin * nearest.normal
     return torch.where(close[:, None], moved.to(points), points)
+
+
+def search_ranges(points: torch.Tensor, skin: torch.Tensor | None, max_distance: float) -> torch.Tensor | float:
+    """How far a nearest-face search need look from each of (N,3) ``points``: ``max_distance``,
+    or less where a point of the body's surface as it is now (N,3; NaN: none known) is nearer,
+    padded by float32's rounding so that the nearest face is never cut off. The answer of a
+    search so bounded is that of the full one (the nearest face lies within the distance to
+    any skin point), and it visits less of the tree."""
+    if skin is None:
+        return max_distance
+    bound = (points - skin).norm(dim=1) * (1.0 + 1e-5) + 1e-6
+    return torch.where(bound < max_distance, bound, torch.full_like(bound, max_distance))
+
+
+def found_points(nearest: Nearest) -> torch.Tensor:
+    """(N,3) the skin points a query found (NaN where it found none)."""
+    return torch.where(nearest.found[:, None], nearest.point, torch.nan)

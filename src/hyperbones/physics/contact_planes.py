@@ -60,7 +60,7 @@ class ContactPlanes:
         """(V,3) -> (V,3): each constrained vertex behind its plane moved onto it along the normal."""
         if not len(self.vertex):
             return positions
-        gap = ((positions[self.vertex] - self.point) * self.normal).sum(-1)
+        gap = ((positions[self.vertex] - self.point) * self.normal).mv(positions.new_ones(3))  # sum(-1), faster
         return positions.index_add(0, self.vertex, gap.neg().clamp_min(0.0)[:, None] * self.normal)
 
 

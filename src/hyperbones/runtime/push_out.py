@@ -18,6 +18,7 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.search import search_backend
+from hyperbones.geometry.surface import found_points, push_outside, search_ranges, surface_points
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.stage_clock import NO_CLOCK
 
@@ -78,8 +79,6 @@ class BodyContact:
         """(V,3) where the skin points of ``character``'s last call lie on ``body`` (Vb,3), this
         frame's posed body (NaN where that call found none; None before a first call). Made
         once a frame: the follow and this frame's first search both use them."""
-        from hyperbones.geometry.surface import surface_points
-
         nearest = self.last_nearest[character]
         if nearest is None:
             return None
@@ -148,7 +147,7 @@ class BodyContact:
         garment = garment.index_copy(0, index, total[index] / degree[index, None].clamp_min(1).to(garment.dtype))
         moved = (garment != queried_at).any(1).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[moved], self.config.query_distance,
-                                       _skin_points(nearest)[moved])
+                                       found_points(nearest)[moved])
         return (garment.index_copy(0, moved, pushed), nearest.with_rows(moved, found),
                 queried_at.index_copy(0, moved, garment[moved]))
 
@@ -171,7 +170,7 @@ class BodyContact:
         clear = floor - shift  # negative: maybe inside, searched however far from the surface
         search = (clear <= config.round_query_distance).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
-                                       _skin_points(nearest)[search])
+                                       found_points(nearest)[search])
         found_floor = _distance_floor(found, config.round_query_distance)
         # The rest keep their record as it was measured from ``queried_at``, which is what
         # bounds their distance in the next round.
@@ -188,9 +187,7 @@ class BodyContact:
         is known), e.g. where the last query found its nearest face. The distance to it bounds
         the vertex's distance to the body, so the search looks no farther: same answer, less work.
         """
-        from hyperbones.geometry.surface import push_outside
-
-        nearest = proximity.query(garment, max_distance=_search_ranges(garment, skin, query_distance))
+        nearest = proximity.query(garment, max_distance=search_ranges(garment, skin, query_distance))
         moved = nearest.found & (nearest.signed_distance < self.margin)
         garment = push_outside(garment, nearest, self.margin)
         for _ in range(self.config.push_rounds - 1):
@@ -199,7 +196,7 @@ class BodyContact:
             if len(index) == 0:
                 break
             # Any skin point bounds a search; the one each vertex was first pushed from is close by.
-            again = proximity.query(garment[index], max_distance=_search_ranges(
+            again = proximity.query(garment[index], max_distance=search_ranges(
                 garment[index], nearest.point[index], self.config.query_distance))
             inside = again.found & (again.signed_distance < 0)
             if not bool(inside.any()):
@@ -213,18 +210,3 @@ def _distance_floor(nearest, searched: float) -> torch.Tensor:
     """(V,) how far each point of a query that looked ``searched`` far certainly is from the
     skin: its signed distance (negative inside), or ``searched`` where it found no face."""
     return torch.where(nearest.found, nearest.signed_distance, torch.full_like(nearest.signed_distance, searched))
-
-
-def _skin_points(nearest) -> torch.Tensor:
-    """(V,3) the skin points a query found (NaN where it found none)."""
-    return torch.where(nearest.found[:, None], nearest.point, torch.nan)
-
-
-def _search_ranges(points: torch.Tensor, skin: torch.Tensor | None, query_distance: float) -> torch.Tensor | float:
-    """How far to look from each of (V,3) ``points``: ``query_distance``, or less where a known
-    skin point (V,3) (NaN: none) is nearer; padded by float32's rounding so the nearest face
-    is never cut off."""
-    if skin is None:
-        return query_distance
-    bound = (points - skin).norm(dim=1) * (1.0 + 1e-5) + 1e-6
-    return torch.where(bound < query_distance, bound, torch.full_like(bound, query_distance))
