@@ -163,3 +163,11 @@ def search_ranges(points: torch.Tensor, skin: torch.Tensor | None, max_distance:
 def found_points(nearest: Nearest) -> torch.Tensor:
     """(N,3) the skin points a query found (NaN where it found none)."""
     return torch.where(nearest.found[:, None], nearest.point, torch.nan)
+
+
+def carried_points(nearest: Nearest, body_vertices: torch.Tensor, faces: torch.Tensor) -> torch.Tensor:
+    """(N,3) the skin points a query found, carried to the body posed as (Vb,3) ``body_vertices``
+    (same face, same barycentric coordinates; NaN where it found none): skin points for
+    ``search_ranges`` after the body has moved."""
+    points = surface_points(body_vertices, faces, nearest.face, nearest.barycentric)
+    return torch.where(nearest.found[:, None], points, torch.nan)

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING
 
 import torch
 
-from hyperbones.geometry.surface import Nearest, found_points, push_outside, search_ranges, surface_points
+from hyperbones.geometry.surface import Nearest, carried_points, found_points, push_outside, search_ranges
 from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.physics.strain_limit import StrainLimiter
 
@@ -57,9 +57,7 @@ def constrain_step(positions: torch.Tensor, velocities: torch.Tensor, limiter: S
     proximity.update(body_after)
     # Every search below is bounded by a skin point known on ``body_after`` (the last answer's,
     # or the one before the step carried onto the body now): the same answers, less searching.
-    carried = torch.where(nearest_before.found[:, None],
-                          surface_points(body_after, proximity.faces, nearest_before.face, nearest_before.barycentric),
-                          torch.nan)
+    carried = carried_points(nearest_before, body_after, proximity.faces)
     reached = proximity.query(positions, max_distance=search_ranges(positions, carried, query_distance))
     inside = movable & reached.found & (reached.signed_distance < margin)
     planes = ContactPlanes.tracked(nearest_before, body_after, proximity.faces, inside, margin)

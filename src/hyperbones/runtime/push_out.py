@@ -18,7 +18,7 @@ import torch
 
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.search import search_backend
-from hyperbones.geometry.surface import found_points, push_outside, search_ranges, surface_points
+from hyperbones.geometry.surface import carried_points, found_points, push_outside, search_ranges
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.stage_clock import NO_CLOCK
 
@@ -83,8 +83,7 @@ class BodyContact:
         if nearest is None:
             return None
         if self._skin_now[character] is None:
-            points = surface_points(body, self.proximities[character].faces, nearest.face, nearest.barycentric)
-            self._skin_now[character] = torch.where(nearest.found[:, None], points, torch.nan)
+            self._skin_now[character] = carried_points(nearest, body, self.proximities[character].faces)
         return self._skin_now[character]
 
     def __call__(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
