@@ -74,16 +74,19 @@ def test_same_motion_elsewhere_gives_the_same_cloth_motion(setup):
 
 
 def test_batched_characters_match_single_ones(setup):
+    """Two garments, the first twice (its rows skinned and rasterised as one group), each on its own motion."""
     model, identities, motion = setup
     model = _trained_looking(model)
-    rotations = torch.stack([motion.joint_rotations, motion.joint_rotations.flip(0)])
-    roots = torch.stack([motion.root_translation, motion.root_translation.flip(0)])
-    together = Simulator(model.runtime, identities)
-    alone = [Simulator(model.runtime, [identity]) for identity in identities]
+    characters = [identities[0], identities[1], identities[0]]
+    rotations = torch.stack([motion.joint_rotations, motion.joint_rotations.flip(0), motion.joint_rotations.roll(7, 0)])
+    roots = torch.stack([motion.root_translation, motion.root_translation.flip(0), motion.root_translation.roll(7, 0)])
+    together = Simulator(model.runtime, characters)
+    alone = [Simulator(model.runtime, [identity]) for identity in characters]
     for t in range(5):
-        both = together.step(rotations[:, t], roots[:, t])
-        for i in range(2):
-            assert torch.allclose(both[i], alone[i].step(rotations[i:i + 1, t], roots[i:i + 1, t])[0], atol=1e-5)
+        all_three = together.step(rotations[:, t], roots[:, t])
+        for i in range(3):
+            assert torch.allclose(all_three[i], alone[i].step(rotations[i:i + 1, t], roots[i:i + 1, t])[0], atol=1e-5)
+    assert not torch.allclose(all_three[0], all_three[2], atol=1e-3)  # the copies moved apart
 
 
 def test_reset_forgets_the_motion(setup):

@@ -53,6 +53,12 @@ def test_config_kinds(tmp_path):
         load_config(bad)
 
 
+def test_frames_per_rollout_must_divide_frames_per_step():
+    with pytest.raises(InputFileError, match="frames_per_rollout .4. must divide joint.frames_per_step .6."):
+        HyperBonesTrainingConfig.from_dict({"joint": {"frames_per_step": 6, "frames_per_rollout": 4}})
+    assert HyperBonesTrainingConfig.from_dict({"joint": {"frames_per_step": 8, "frames_per_rollout": 4}})
+
+
 def test_joint_steps_from_a_teacher_run(tmp_path, body):
     teacher_run = tmp_path / "teacher"
     phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=2)
@@ -125,6 +131,18 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
     assert all(torch.equal(v, trainer.teacher.state_dict()[k]) for k, v in teacher_before.items())
     assert any(not torch.equal(a, b) for a, b in zip(runtime_before, trainer.model.runtime.parameters()))
     assert any(r.latents is not None for r in trainer.cache.rollouts)
+    # A batch of frames (two of one rollout: encoded and skinned once; three bodies, one search,
+    # one joined mesh) scores as the mean of each frame alone.
+    first, second = trainer.cache.rollouts[:2]
+    samples = [(first, 3), (second, 5), (first, 4)]
+    with torch.no_grad():
+        together = trainer._runtime_frames_terms(samples, collision_weight=1e5)
+        alone = [trainer._runtime_frames_terms([sample], collision_weight=1e5) for sample in samples]
+    assert {"a_mse", "a_stretching", "a_collision"} <= set(together)
+    for name, value in together.items():
+        assert torch.allclose(value, sum(terms[name] for terms in alone) / 3, rtol=1e-4, atol=1e-12), name
+    drawn = trainer.cache.sample_frames(6, per_rollout=3)
+    assert len(drawn) == 6 and drawn[0][0] is drawn[2][0] and drawn[3][0] is drawn[5][0]
     # No rollout stays within a micrometre of its skinned pose: each refresh drew MAX_DRAWS and kept the last.
     assert trainer.cache.refused == (MAX_DRAWS - 1) * len(trainer.cache.rollouts)
     trainer.step += 1

@@ -31,7 +31,7 @@ def test_module_a_overfits_one_cached_frame(tmp_path, body, monkeypatch):
         trainer.step += 1
         assert set(L_3D) <= set(logs) and "a_stretching" not in logs
         losses.append(sum(logs[name] for name in L_3D))
-    final = trainer._runtime_frame_terms(collision_weight=1.0)
+    final = trainer._runtime_frames_terms([(rollout, last)], collision_weight=1.0)
     trainer.close()
     final_loss = sum(float(final[name].detach()) for name in L_3D)
     assert losses[0] > 1.0  # cm²: A starts centimetres off C's garment (virtual-bone skinning)

@@ -44,12 +44,11 @@ def test_trainer_and_runtime_give_the_same_module_a_output(tmp_path, body, monke
     rollout = trainer.cache.assemble(identity, motion.name, rotations, roots,
                                      identity.skin(posed.skinning_transforms), posed=posed)
 
-    # The trainer's path to Module A's garment (``_runtime_frame_terms``) on each frame t.
+    # The trainer's path to Module A's garment (``_runtime_frames_terms``) on each frame t.
     seen = []
     monkeypatch.setattr(joint, "runtime_terms", lambda garment, *args, **kwargs: seen.append(garment.detach()) or {})
     for t in range(frames):
-        monkeypatch.setattr(trainer.cache, "sample", lambda t=t: (rollout, t))
-        trainer._runtime_frame_terms(collision_weight=1.0)
+        trainer._runtime_frames_terms([(rollout, t)], collision_weight=1.0)
 
     # The runtime's: the identity encoded as ``Simulator.load`` encodes it, then one step a frame.
     with torch.no_grad():

@@ -20,6 +20,11 @@
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 HYPERBONES_CONFIG=configs/hyperbones-small.toml
+# Phase 2 on a GPU: Module A learns 64 cached frames a step, 8 from each of 8 rollouts (one batch through A,
+# one body search), from a cache of 128 rollouts with one new every 8 steps; the CPU keeps the config's 4
+# frames (docs/experiments/2026-11-28-phase2-frames-in-batches.md).
+GPU_PHASE2=(--set=joint.frames_per_step=64 --set=joint.frames_per_rollout=8 --set=joint.cache_size=128
+            --set=joint.refresh_every=8)
 PYTHON="${PYTHON:-python3}"
 FOLDER="${TRAIN_FOLDER:-.device/train}"
 mode=run device=cuda quick="" phase=""
@@ -53,5 +58,7 @@ fi
 if [ $mode = size ]; then
   exec "${job[@]}" size --phase "$phase" --carry "$FOLDER/site" "$pack" --state "$state" --minutes "$minutes"
 fi
+sets=()
+[ $device = cuda ] && [ $phase = hyperbones ] && sets=("${GPU_PHASE2[@]}")
 exec "${job[@]}" run --config "$config" --pack "$pack" --state "$state" --out "${OUT:-$FOLDER/out-$phase}" \
-  --device $device --minutes "$minutes" $quick ${TRAIN_ARGS:-}
+  --device $device --minutes "$minutes" $quick "${sets[@]}" ${TRAIN_ARGS:-}

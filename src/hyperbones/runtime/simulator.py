@@ -74,7 +74,10 @@ class IdentityBatch:
     Bone-Net and the Conv-MLP take from them stacked once, not every frame.
 
     film: (N,layers,2,hidden); features_uv: (N,d_f,R,R); coverage: (N,1,R,R);
-    codes: (N,B,C) the per-bone Bone-Net's bone codes (``module_a.bone_codes``).
+    codes: (N,B,C) the per-bone Bone-Net's bone codes (``module_a.bone_codes``);
+    groups: the distinct identities, each with its rows (``identity_groups``);
+    group_rows: those rows as (n,) int64 tensors; order: (N,) each row's place when the
+    groups' rows are laid one after another.
     """
 
     identities: list[Identity]
@@ -82,15 +85,34 @@ class IdentityBatch:
     features_uv: torch.Tensor
     coverage: torch.Tensor
     codes: torch.Tensor
+    groups: list[tuple[Identity, list[int]]]
+    group_rows: list[torch.Tensor]
+    order: torch.Tensor
 
     @classmethod
     def of(cls, identities: list[Identity]) -> "IdentityBatch":
-        codes = [bone_codes(identity.bones.joint_weights, identity.bones.rest_positions,
-                            identity.rest_joint_positions[0], identity.vertex_features, identity.bones.garment_vertex)
-                 for identity in identities]
-        return cls(identities, torch.stack([identity.film for identity in identities]),
-                   torch.stack([identity.features_uv for identity in identities]),
-                   torch.stack([identity.raster.coverage for identity in identities])[:, None], torch.stack(codes))
+        groups = identity_groups(identities)
+        codes = torch.stack([bone_codes(identity.bones.joint_weights, identity.bones.rest_positions,
+                                        identity.rest_joint_positions[0], identity.vertex_features,
+                                        identity.bones.garment_vertex) for identity, _ in groups])
+        film = torch.stack([identity.film for identity, _ in groups])
+        features_uv = torch.stack([identity.features_uv for identity, _ in groups])
+        coverage = torch.stack([identity.raster.coverage for identity, _ in groups])[:, None]
+        rows = [torch.tensor(group_rows, device=film.device) for _, group_rows in groups]
+        group_of = torch.cat([torch.full_like(index, group) for group, index in enumerate(rows)])
+        order = torch.cat(rows).argsort()
+        group_of = group_of[order]  # (N,) each row's group
+        return cls(identities, film[group_of], features_uv[group_of], coverage[group_of], codes[group_of], groups,
+                   rows, order)
+
+
+def identity_groups(identities: list[Identity]) -> list[tuple[Identity, list[int]]]:
+    """The distinct identities of a batch (the same object repeated is one), in order of first
+    appearance, each with the batch rows it fills: per-identity work runs once per group."""
+    groups: dict[int, tuple[Identity, list[int]]] = {}
+    for row, identity in enumerate(identities):
+        groups.setdefault(id(identity), (identity, []))[1].append(row)
+    return list(groups.values())
 
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
@@ -107,7 +129,9 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
     Returns:
         N tensors (V_i,3): world garment positions at t.
     """
-    identities = batch.identities
+    # Rows of one identity (a crowd of copies, a trainer's frames of one rollout) are skinned,
+    # rasterised and sampled together: the work per step grows with the distinct identities.
+    groups, rows = [identity for identity, _ in batch.groups], batch.group_rows
     with clock.stage("Bone-Net"):
         local_window = transform_points(to_local[:, None], window)
         delta, pose_embedding = module_a.bone_corrections(local_window, batch.codes, batch.film)
@@ -115,22 +139,26 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         local_positions = transform_points(to_local, positions)
         local_rotations, local_positions = correct_bones(local_rotations, local_positions, delta)
     with clock.stage("garment skinning"):
-        stage_one = [
+        stage_one = [  # per group (n,V,3)
             linear_blend_skinning(identity.rest_vertices, identity.weights,
-                                  skinning_transforms(identity.bones.rest_positions, local_rotations[i:i + 1],
-                                                      local_positions[i:i + 1]))[0]
-            for i, identity in enumerate(identities)]
+                                  skinning_transforms(identity.bones.rest_positions, local_rotations[index],
+                                                      local_positions[index]))
+            for identity, index in zip(groups, rows)]
     if module_a.refiner is not None:
         with clock.stage("UV raster"):
-            images = torch.cat([identity.raster.rasterize(points[None])
-                                for identity, points in zip(identities, stage_one)])
+            images = torch.cat([identity.raster.rasterize(points)
+                                for identity, points in zip(groups, stage_one)])[batch.order]
         with clock.stage("Conv-MLP"):  # in the refiner's dtype and layout (``ModuleA.for_inference``)
             displacement = module_a.refine(images, batch.coverage, batch.features_uv, pose_embedding)
         with clock.stage("UV sampling"):
-            stage_one = [points + identity.raster.sample(displacement[i:i + 1])[0]
-                         for i, (identity, points) in enumerate(zip(identities, stage_one))]
+            stage_one = [points + identity.raster.sample(displacement[index])
+                         for identity, points, index in zip(groups, stage_one, rows)]
     to_world = torch.linalg.inv(to_local)
-    return [transform_points(to_world[i], points) for i, points in enumerate(stage_one)]
+    garments: list[torch.Tensor | None] = [None] * len(batch.identities)
+    for (_, group_rows), points, index in zip(batch.groups, stage_one, rows):
+        for row, world in zip(group_rows, transform_points(to_world[index], points)):
+            garments[row] = world
+    return garments
 
 
 class Simulator:

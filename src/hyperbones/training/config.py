@@ -177,7 +177,11 @@ class JointConfig:
     end_fraction: float = 0.3
     """Share of rollouts that end where their clip ends (in its hold), so A sees the cloth settle."""
     frames_per_step: int = 1
-    """Cached frames A is trained on per optimiser step."""
+    """Cached frames A is trained on per optimiser step (one batch through Modules B and A)."""
+    frames_per_rollout: int = 1
+    """Of those, frames drawn from each drawn rollout (it must divide ``frames_per_step``): Module B, the bones'
+    posing and A's skinning and UV maps then run once per rollout, so a GPU step of many frames costs per
+    rollout, not per frame. 1: every frame from a rollout drawn for it."""
     position_scale: float = 1e4
     """Factor on L_MSE and L_lap (errors in m²); 1e4 takes them in cm², so a centimetre of error
     weighs about as much as a joule of the physics terms."""
@@ -203,6 +207,11 @@ class JointConfig:
     bank: str = ""
     """Folder of saved teacher rollouts (``hyperbones rollouts``): refreshes load the ones not yet cached and
     simulate only when none is left. Empty: every rollout is simulated as training goes."""
+
+    def __post_init__(self) -> None:
+        if self.frames_per_step < 1 or self.frames_per_rollout < 1 or self.frames_per_step % self.frames_per_rollout:
+            raise ParameterError(f"joint.frames_per_rollout ({self.frames_per_rollout}) must divide "
+                                 f"joint.frames_per_step ({self.frames_per_step}), both at least 1")
 
 
 @dataclass(frozen=True)

@@ -66,12 +66,8 @@ class EpisodeBatch:
         if any(isinstance(rest.material, BatchMaterial) for rest in rests):
             raise ParameterError("an identity of an episode batch already holds a batch")
         sizes = tuple(rest.num_vertices for rest in rests)
-        device = rests[0].rest_vertices.device
-        offsets = torch.tensor((0, *sizes), device=device).cumsum(0)
-        material = BatchMaterial.concatenate([rest.material for rest in rests], [len(rest.faces) for rest in rests],
-                                             [len(rest.hinges) for rest in rests], sizes,
-                                             dtype=rests[0].face_areas.dtype, device=device)
-        rest = _joined_rest(rests, offsets, material)
+        rest, offsets = joined_rest(rests)
+        material = rest.material
         topology = _joined_topology([identity.topology for identity in identities], offsets, material)
         limiter = _joined_limiter([identity.limiter for identity in identities], offsets)
         if not (topology.num_vertices == len(limiter.inverse_masses) == rest.num_vertices):
@@ -118,6 +114,19 @@ class EpisodeBatch:
 def _shifted(tensors: Sequence[torch.Tensor], offsets: torch.Tensor) -> torch.Tensor:
     """Per-garment vertex indices (any shape, first axis the elements) joined, garment b's shifted by offsets[b]."""
     return torch.cat([tensor + offset for tensor, offset in zip(tensors, offsets.tolist())])
+
+
+def joined_rest(rests: Sequence[ClothRest]) -> tuple[ClothRest, torch.Tensor]:
+    """Garments' rest states (one fabric each) as one rest state of their meshes laid one after
+    another, with a ``BatchMaterial``; and (B+1,) int64 where each garment's vertices start.
+    Energies on it are the sums of each garment's own."""
+    sizes = [rest.num_vertices for rest in rests]
+    device = rests[0].rest_vertices.device
+    offsets = torch.tensor((0, *sizes), device=device).cumsum(0)
+    material = BatchMaterial.concatenate([rest.material for rest in rests], [len(rest.faces) for rest in rests],
+                                         [len(rest.hinges) for rest in rests], sizes,
+                                         dtype=rests[0].face_areas.dtype, device=device)
+    return _joined_rest(rests, offsets, material), offsets
 
 
 def _joined_rest(rests: Sequence[ClothRest], offsets: torch.Tensor, material: BatchMaterial) -> ClothRest:
@@ -174,4 +183,4 @@ def _joined_limiter(limiters: Sequence[StrainLimiter], offsets: torch.Tensor) ->
                          torch.cat([limiter.edge_counts for limiter in limiters]), stretch, compression, iterations)
 
 
-__all__ = ["EpisodeBatch"]
+__all__ = ["EpisodeBatch", "joined_rest"]

@@ -91,11 +91,6 @@ class PackJointTrainer(PackTraining, JointTrainer):
         return PackRollouts(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
                             self.device, config.data.settle_dt, self.rollout_batch, config.train.bfloat16)
 
-    def _make_runtime_proximity(self):
-        from hyperbones.geometry.torch_proximity import TorchProximity
-
-        return TorchProximity(self.body_faces, device=self.device)
-
     def _extra_terms(self):
         terms = super()._extra_terms()
         self.episode_steps += self.config.joint.frames_per_step

@@ -17,10 +17,12 @@ from __future__ import annotations
 import os
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
 from hyperbones.errors import ParameterError
+from hyperbones.geometry.batched_proximity import BatchedProximity
 from hyperbones.models.hyperbones import HyperBonesConfig, HyperBonesModel
 from hyperbones.models.loading import load_checkpoint
 from hyperbones.models.module_a import heading_frame
@@ -29,8 +31,12 @@ from hyperbones.physics.hard_contact import QUERY_DISTANCE
 from hyperbones.runtime.identity import apply_encoder
 from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
 from hyperbones.training.config import HyperBonesTrainingConfig
+from hyperbones.training.episode_batch import joined_rest
 from hyperbones.training.loss import collision_weight_at, runtime_terms
 from hyperbones.training.trainer import TeacherTrainer, check_sections
+
+if TYPE_CHECKING:  # training.rollouts reaches Anny's body: imported where the Anny cache is made
+    from hyperbones.training.rollouts import TeacherRollout
 
 INITIAL_ROLLOUTS = 4  # made before the first step; the cache then grows by one per refresh
 
@@ -52,7 +58,6 @@ class JointTrainer(TeacherTrainer):
             self.teacher.requires_grad_(False)  # Adam skips parameters without gradients
             self.teacher.eval()  # its input statistics stay as phase 1 left them
         self.cache = self._make_rollouts()
-        self.runtime_proximity = self._make_runtime_proximity()
 
     def _make_rollouts(self):
         """The cache of C's rollouts that A learns from: simulated on Anny bodies, or a bank's."""
@@ -61,12 +66,6 @@ class JointTrainer(TeacherTrainer):
         config = self.config
         return RolloutCache(self.data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution,
                             self.device, config.data.settle_dt)
-
-    def _make_runtime_proximity(self):
-        """The body search for A's interpenetration and collision terms (Warp's)."""
-        from hyperbones.geometry.proximity import BodyProximity
-
-        return BodyProximity(self.data.default_body.faces, device=self.device)
 
     def _build_model(self) -> torch.nn.Module:
         return HyperBonesModel(HyperBonesConfig(self.config.model, self.config.runtime))
@@ -110,31 +109,55 @@ class JointTrainer(TeacherTrainer):
             self.cache.refresh(self.teacher, self.step)  # grows until full, then replaces the oldest
         weight = collision_weight_at(self.step, self.config.train.collision_weight_start,
                                      self.config.train.collision_weight_end, self.config.train.collision_ramp_steps)
-        totals: dict[str, torch.Tensor] = {}
-        for _ in range(joint.frames_per_step):
-            for name, value in self._runtime_frame_terms(weight).items():
-                totals[name] = totals.get(name, 0.0) + value / joint.frames_per_step
-        return totals
+        return self._runtime_frames_terms(self.cache.sample_frames(joint.frames_per_step, joint.frames_per_rollout),
+                                          weight)
 
-    def _runtime_frame_terms(self, collision_weight: float) -> dict[str, torch.Tensor]:
-        """Module B then A on one cached frame, against C's garment there."""
-        rollout, t = self.cache.sample()
-        device = self.device
-        if not self.config.joint.train_teacher and rollout.latents is None:
-            with torch.no_grad():
-                rollout.latents = self.model.trunk_latents(rollout.geometry.graph, train_trunk=False)
-        identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime,
-                                 latents=rollout.latents)
-        # A's window: frames t−K+1 … t; before the rollout's first frame it repeats that
-        # frame, as the runtime does when it starts.
-        frames = (torch.arange(t - self.config.runtime.window_frames + 1, t + 1)).clamp_min(0)
-        rotations, positions = identity.bones.pose(rollout.skinning[frames].to(device))  # (K,B,3,3), (K,B,3)
-        to_local = heading_frame(rollout.joint_rotations[t, 0].to(device), rollout.root_translation[t].to(device))
-        garment = module_a_frame(self.model.runtime, IdentityBatch.of([identity]), positions[None], rotations[-1:],
-                                 positions[-1:], to_local[None])[0]
-        body = rollout.body_vertices[t].to(device)
-        self.runtime_proximity.update(body)
-        nearest = self.runtime_proximity.query(garment.detach(), max_distance=QUERY_DISTANCE)
-        return runtime_terms(garment, rollout.positions[t].to(device), rollout.edges.to(device),
-                             rollout.physics.rest.to(device), nearest, body, self.body_faces, collision_weight,
-                             self.config.joint)
+    def _runtime_frames_terms(self, samples: list[tuple[TeacherRollout, int]],
+                              collision_weight: float) -> dict[str, torch.Tensor]:
+        """Module B then A on F cached frames at once (a rollout and a frame t of it each),
+        against C's garments there: ``runtime_terms``' mean over the F frames. Module B runs once
+        per distinct rollout, and A's per-identity work once per identity (``module_a_frame``).
+
+        The F garments go through Module A as one batch, are searched on their F bodies in one
+        query (``BatchedProximity``: Warp's search per body on a CPU that has it, the torch
+        search over all bodies at once elsewhere) and are scored as one joined mesh, so a
+        step of many frames keeps a GPU busy.
+        """
+        device, window = self.device, self.config.runtime.window_frames
+        groups: dict[int, tuple[TeacherRollout, list[int]]] = {}  # the frames of each rollout
+        for rollout, t in samples:
+            groups.setdefault(id(rollout), (rollout, []))[1].append(t)
+        identities, windows, rotations, to_local, targets, bodies, rests, edges = [], [], [], [], [], [], [], []
+        for rollout, times in groups.values():
+            if not self.config.joint.train_teacher and rollout.latents is None:
+                with torch.no_grad():
+                    rollout.latents = self.model.trunk_latents(rollout.geometry.graph, train_trunk=False)
+            identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime,
+                                     latents=rollout.latents)
+            identities += [identity] * len(times)
+            rests += [rollout.physics.rest.to(device)] * len(times)
+            edges += [rollout.edges.to(device)] * len(times)
+            # A's window: frames t−K+1 … t; before the rollout's first frame it repeats that
+            # frame, as the runtime does when it starts.
+            times = torch.tensor(times)
+            frames = (times[:, None] + torch.arange(1 - window, 1)).clamp_min(0)  # (n,K)
+            frame_rotations, frame_positions = identity.bones.pose(rollout.skinning[frames].to(device))
+            windows.append(frame_positions)  # (n,K,B,3)
+            rotations.append(frame_rotations[:, -1])  # (n,B,3,3)
+            to_local.append(heading_frame(rollout.joint_rotations[times, 0].to(device),
+                                          rollout.root_translation[times].to(device)))  # (n,4,4)
+            targets.append(rollout.positions[times].to(device).flatten(0, 1))  # (n·V,3) C's garments
+            bodies.append(rollout.body_vertices[times].to(device))  # (n,Vb,3)
+        windows = torch.cat(windows)  # (F,K,B,3)
+        garments = module_a_frame(self.model.runtime, IdentityBatch.of(identities), windows, torch.cat(rotations),
+                                  windows[:, -1], torch.cat(to_local))
+        rest, offsets = joined_rest(rests)
+        positions = torch.cat(garments)  # (N,3), the F garments in the order of ``identities``
+        edges = torch.cat([frame_edges + offset for frame_edges, offset in zip(edges, offsets.tolist())])
+        bodies = torch.cat(bodies)  # (F,Vb,3)
+        proximity = BatchedProximity(self.body_faces, bodies.shape[1], offsets, device)
+        proximity.update(bodies)
+        nearest = proximity.query(positions.detach(), max_distance=QUERY_DISTANCE)
+        return runtime_terms(positions, torch.cat(targets), edges, rest, nearest, bodies.reshape(-1, 3),
+                             proximity.faces, collision_weight, self.config.joint,
+                             frame_sizes=[len(garment) for garment in garments])

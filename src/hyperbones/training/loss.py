@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+
 import torch
 
 from hyperbones.geometry.diffusion import diffuse
@@ -56,19 +58,31 @@ def laplacian(values: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
 
 def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Tensor, rest: ClothRest,
                   nearest: Nearest, body: torch.Tensor, body_faces: torch.Tensor, collision_weight: float,
-                  config) -> dict[str, torch.Tensor]:
-    """Module A's loss for one frame (paper Sec. 3.5): L_3D against C plus physics on A's output.
+                  config, frame_sizes: Sequence[int] | None = None) -> dict[str, torch.Tensor]:
+    """Module A's loss (paper Sec. 3.5): L_3D against C plus physics on A's output, the mean
+    over F frames, each of one garment on its body.
 
-    positions: (V,3) A's garment; target: (V,3) C's (no gradient); edges: (E,2) garment edges;
-    nearest: body faces found for ``positions`` on ``body`` (Vb,3) at that frame;
+    positions: (V,3) A's garments, the F frames' one after another (``frame_sizes``: their
+    vertex counts; None: one frame); target: (V,3) C's (no gradient); edges: (E,2) the
+    garments' edges in that numbering; rest: their joined rest state
+    (``episode_batch.joined_rest``); nearest: body faces found for ``positions`` on ``body``
+    (Vb,3), the F bodies laid one after another, whose faces are ``body_faces``;
     config: ``JointConfig``.
 
-    L_3D = MSE + λ_lap·L_lap + λ_interp·L_interp, each a mean over vertices with lengths in
-    centimetres (``position_scale``). L_lap is taken on the error A − C: it punishes the
-    per-vertex ripples that sparse bones leave, and is zero when A matches C (on A's
-    positions alone it would also punish every fold C makes). L_interp = mean max(0, ε − d)²
-    with d the signed distance to the nearest body face's plane.
+    L_3D = MSE + λ_lap·L_lap + λ_interp·L_interp, each a mean over a frame's vertices with
+    lengths in centimetres (``position_scale``). L_lap is taken on the error A − C: it
+    punishes the per-vertex ripples that sparse bones leave, and is zero when A matches C (on
+    A's positions alone it would also punish every fold C makes). L_interp = mean
+    max(0, ε − d)² with d the signed distance to the nearest body face's plane. The
+    energies, sums over a garment, are averaged over the frames.
     """
+    sizes = [positions.shape[0]] if frame_sizes is None else list(frame_sizes)
+    if sum(sizes) != positions.shape[0]:
+        raise ValueError(f"frame_sizes {sizes} do not add up to the {positions.shape[0]} positions")
+    frames = len(sizes)
+    # Each vertex's share of a per-frame mean, averaged over the frames: 1/(F·V_f).
+    share = torch.tensor([1.0 / (frames * size) for size in sizes], dtype=positions.dtype,
+                         device=positions.device).repeat_interleave(torch.tensor(sizes, device=positions.device))
     scale = config.position_scale
     error = positions - target.detach()
     origin, normal = face_planes(body, body_faces, nearest.face)
@@ -76,13 +90,13 @@ def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Te
     touching = normal.square().sum(-1) > 0
     inside = (config.interpenetration_epsilon - distance).clamp_min(0) * touching
     terms = {
-        "a_mse": error.square().sum(-1).mean() * scale,
-        "a_laplacian": config.laplacian_weight * laplacian(error, edges).square().sum(-1).mean() * scale,
-        "a_interpenetration": config.interpenetration_weight * inside.square().mean() * scale,
+        "a_mse": (error.square().sum(-1) * share).sum() * scale,
+        "a_laplacian": config.laplacian_weight * (laplacian(error, edges).square().sum(-1) * share).sum() * scale,
+        "a_interpenetration": config.interpenetration_weight * (inside.square() * share).sum() * scale,
     }
     if config.physics_on_runtime:
-        terms["a_stretching"] = stretching_energy(positions, rest)
-        terms["a_bending"] = bending_energy(positions, rest)
+        terms["a_stretching"] = stretching_energy(positions, rest) / frames
+        terms["a_bending"] = bending_energy(positions, rest) / frames
         terms["a_collision"] = collision_energy(positions, origin, normal, eps=COLLISION_EPSILON,
-                                                weight=collision_weight)
+                                                weight=collision_weight) / frames
     return terms

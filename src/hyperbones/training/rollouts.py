@@ -203,6 +203,16 @@ class RolloutCache:
         rollout = self.data.random.choice(self.rollouts)
         return rollout, self.data.random.randrange(2, rollout.num_frames)
 
+    def sample_frames(self, count: int, per_rollout: int = 1) -> list[tuple[TeacherRollout, int]]:
+        """``count`` (rollout, t) pairs: ``count // per_rollout`` cached rollouts drawn (``sample``),
+        ``per_rollout`` frames of each, a rollout's pairs next to each other."""
+        samples = []
+        for _ in range(count // per_rollout):
+            rollout, t = self.sample()
+            samples += [(rollout, t)] + [(rollout, self.data.random.randrange(2, rollout.num_frames))
+                                         for _ in range(per_rollout - 1)]
+        return samples
+
 
 BANK_VERSION = 1
 

@@ -289,11 +289,13 @@ class TeacherTrainer:
         frozen parameters are copied."""
         decay = self.config.train.ema_decay
         parameters = {name for name, value in self.model.named_parameters() if value.requires_grad}
-        for name, value in self.model.state_dict().items():
-            if name in parameters:
-                self.ema[name].mul_(decay).add_(value, alpha=1.0 - decay)
-            else:
-                self.ema[name].copy_(value)
+        state = self.model.state_dict()
+        trained = [name for name in state if name in parameters]
+        fixed = [name for name in state if name not in parameters]
+        # One multi-tensor op each (not one per tensor): on a GPU every small op is a launch.
+        torch._foreach_lerp_([self.ema[name] for name in trained], [state[name] for name in trained], 1.0 - decay)
+        if fixed:
+            torch._foreach_copy_([self.ema[name] for name in fixed], [state[name] for name in fixed])
 
     # -- the loop -----------------------------------------------------------------------
     def train(self) -> int:
