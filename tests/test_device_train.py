@@ -171,3 +171,23 @@ def test_the_device_training_runs_on_the_cpu(tmp_path, phase):
         if call == "call1":
             (tmp_path / call / "state").rename(committed)
     assert f"resuming {committed}" in (tmp_path / "call2" / "train.log").read_text()
+
+
+def test_the_gpu_phase2_settings_make_a_valid_config_for_the_run_and_its_smoke_check():
+    """train.sh's GPU_PHASE2 overrides on the phase-2 config, as the run takes them and as its
+    smoke check does (``--smoke`` then sets one frame a step)."""
+    import re
+    import shlex
+
+    from hyperbones.training.config import apply_overrides, load_config
+    from hyperbones.training.from_pack import QUICK_JOINT
+
+    script = (ROOT / "scripts/device/train.sh").read_text()
+    sets = shlex.split(re.search(r"^GPU_PHASE2=\((.*?)\)", script, re.S | re.M).group(1))
+    config_path = re.search(r"^HYPERBONES_CONFIG=(\S+)", script, re.M).group(1)
+    overrides = [value.removeprefix("--set=") for value in sets]
+    assert overrides and all(value != option for value, option in zip(overrides, sets))  # each one --set=...
+    run_config = apply_overrides(load_config(ROOT / config_path), overrides)
+    assert run_config.joint.frames_per_step > run_config.joint.frames_per_rollout > 1
+    smoke = apply_overrides(run_config, QUICK_JOINT)
+    assert smoke.joint.frames_per_step == smoke.joint.frames_per_rollout == 1

@@ -107,7 +107,8 @@ def trainer_for(config, run_dir, pack: TrainingPack, **options):
 
 QUICK_TRAINING = ("train.log_every=1", "train.rollout_start=2", "train.rollout_max=2", "train.rollout_ramp_steps=0")
 """``--quick``'s training settings (with ``training.pack.QUICK_DATA``); phase 2 adds ``QUICK_JOINT``."""
-QUICK_JOINT = ("joint.rollout_frames=6", "joint.cache_size=2", "joint.refresh_every=2", "joint.frames_per_step=1")
+QUICK_JOINT = ("joint.rollout_frames=6", "joint.cache_size=2", "joint.refresh_every=2", "joint.frames_per_step=1",
+               "joint.frames_per_rollout=1")
 SMOKE_STEPS = 3  # ``--smoke``: steps past the first rollouts and the first refresh
 
 

@@ -3,9 +3,10 @@
 Every optimiser step sums
   - C's physics terms on its own episode (exactly the teacher trainer's step), and
   - A's terms on ``joint.frames_per_step`` frames drawn from a cache of C's whole rollouts
-    (``training.rollouts``): Module B encodes the frame's identity (through the trunk C
-    uses, so both losses train it), Module A predicts the garment from the bone window,
-    and ``runtime_terms`` compares it with C's state there.
+    (``training.rollouts``; ``joint.frames_per_rollout`` of each drawn rollout), in one
+    batch: Module B encodes each rollout's identity (through the trunk C uses, so both
+    losses train it), Module A predicts the garments from their bone windows, and
+    ``runtime_terms`` compares them with C's states there.
 With ``joint.train_teacher`` off, C and the trunk are frozen (a finished phase-1 teacher):
 a step is A's terms alone, and each rollout's trunk latents are computed once.
 The rollout cache is rebuilt from the current C when a run resumes (it is not saved).
@@ -127,7 +128,7 @@ class JointTrainer(TeacherTrainer):
         groups: dict[int, tuple[TeacherRollout, list[int]]] = {}  # the frames of each rollout
         for rollout, t in samples:
             groups.setdefault(id(rollout), (rollout, []))[1].append(t)
-        identities, windows, rotations, to_local, targets, bodies, rests, edges = [], [], [], [], [], [], [], []
+        identities, windows, rotations, to_local, targets, bodies, rests, edge_lists = [], [], [], [], [], [], [], []
         for rollout, times in groups.values():
             if not self.config.joint.train_teacher and rollout.latents is None:
                 with torch.no_grad():
@@ -136,7 +137,7 @@ class JointTrainer(TeacherTrainer):
                                      latents=rollout.latents)
             identities += [identity] * len(times)
             rests += [rollout.physics.rest.to(device)] * len(times)
-            edges += [rollout.edges.to(device)] * len(times)
+            edge_lists += [rollout.edges.to(device)] * len(times)
             # A's window: frames t−K+1 … t; before the rollout's first frame it repeats that
             # frame, as the runtime does when it starts.
             times = torch.tensor(times)
@@ -153,7 +154,7 @@ class JointTrainer(TeacherTrainer):
                                   windows[:, -1], torch.cat(to_local))
         rest, offsets = joined_rest(rests)
         positions = torch.cat(garments)  # (N,3), the F garments in the order of ``identities``
-        edges = torch.cat([frame_edges + offset for frame_edges, offset in zip(edges, offsets.tolist())])
+        edges = torch.cat([frame_edges + offset for frame_edges, offset in zip(edge_lists, offsets.tolist())])
         bodies = torch.cat(bodies)  # (F,Vb,3)
         proximity = BatchedProximity(self.body_faces, bodies.shape[1], offsets, device)
         proximity.update(bodies)
