@@ -20,7 +20,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, TypeVar
 
 import torch
 
@@ -75,7 +75,7 @@ class IdentityBatch:
 
     film: (N,layers,2,hidden); features_uv: (N,d_f,R,R); coverage: (N,1,R,R);
     codes: (N,B,C) the per-bone Bone-Net's bone codes (``module_a.bone_codes``);
-    groups: the distinct identities, each with its rows (``identity_groups``);
+    groups: the distinct identities, each with its rows (``grouped_rows``);
     group_rows: those rows as (n,) int64 tensors; order: (N,) each row's place when the
     groups' rows are laid one after another.
     """
@@ -91,7 +91,7 @@ class IdentityBatch:
 
     @classmethod
     def of(cls, identities: list[Identity]) -> "IdentityBatch":
-        groups = identity_groups(identities)
+        groups = grouped_rows(identities)
         codes = torch.stack([bone_codes(identity.bones.joint_weights, identity.bones.rest_positions,
                                         identity.rest_joint_positions[0], identity.vertex_features,
                                         identity.bones.garment_vertex) for identity, _ in groups])
@@ -106,12 +106,16 @@ class IdentityBatch:
                    rows, order)
 
 
-def identity_groups(identities: list[Identity]) -> list[tuple[Identity, list[int]]]:
-    """The distinct identities of a batch (the same object repeated is one), in order of first
-    appearance, each with the batch rows it fills: per-identity work runs once per group."""
-    groups: dict[int, tuple[Identity, list[int]]] = {}
-    for row, identity in enumerate(identities):
-        groups.setdefault(id(identity), (identity, []))[1].append(row)
+Item = TypeVar("Item")
+
+
+def grouped_rows(items: list[Item]) -> list[tuple[Item, list[int]]]:
+    """The distinct objects of a list (the same object repeated is one), in order of first
+    appearance, each with the rows it fills: work per object (an identity of a crowd, a
+    rollout of a training batch) then runs once per group."""
+    groups: dict[int, tuple[Item, list[int]]] = {}
+    for row, item in enumerate(items):
+        groups.setdefault(id(item), (item, []))[1].append(row)
     return list(groups.values())
 
 

@@ -30,7 +30,7 @@ from hyperbones.models.module_a import heading_frame
 from hyperbones.models.teacher import Teacher
 from hyperbones.physics.hard_contact import QUERY_DISTANCE
 from hyperbones.runtime.identity import apply_encoder
-from hyperbones.runtime.simulator import IdentityBatch, module_a_frame
+from hyperbones.runtime.simulator import IdentityBatch, grouped_rows, module_a_frame
 from hyperbones.training.config import HyperBonesTrainingConfig
 from hyperbones.training.episode_batch import joined_rest
 from hyperbones.training.loss import collision_weight_at, runtime_terms
@@ -125,22 +125,19 @@ class JointTrainer(TeacherTrainer):
         step of many frames keeps a GPU busy.
         """
         device, window = self.device, self.config.runtime.window_frames
-        groups: dict[int, tuple[TeacherRollout, list[int]]] = {}  # the frames of each rollout
-        for rollout, t in samples:
-            groups.setdefault(id(rollout), (rollout, []))[1].append(t)
         identities, windows, rotations, to_local, targets, bodies, rests, edge_lists = [], [], [], [], [], [], [], []
-        for rollout, times in groups.values():
+        for rollout, rows in grouped_rows([rollout for rollout, _ in samples]):
+            times = torch.tensor([samples[row][1] for row in rows])  # (n,) the frames of this rollout
             if not self.config.joint.train_teacher and rollout.latents is None:
                 with torch.no_grad():
                     rollout.latents = self.model.trunk_latents(rollout.geometry.graph, train_trunk=False)
             identity = apply_encoder(self.model, rollout.geometry, train_trunk=self.config.joint.trunk_from_runtime,
                                      latents=rollout.latents)
-            identities += [identity] * len(times)
-            rests += [rollout.physics.rest.to(device)] * len(times)
-            edge_lists += [rollout.edges.to(device)] * len(times)
+            identities += [identity] * len(rows)
+            rests += [rollout.physics.rest.to(device)] * len(rows)
+            edge_lists += [rollout.edges.to(device)] * len(rows)
             # A's window: frames t−K+1 … t; before the rollout's first frame it repeats that
             # frame, as the runtime does when it starts.
-            times = torch.tensor(times)
             frames = (times[:, None] + torch.arange(1 - window, 1)).clamp_min(0)  # (n,K)
             frame_rotations, frame_positions = identity.bones.pose(rollout.skinning[frames].to(device))
             windows.append(frame_positions)  # (n,K,B,3)
