@@ -199,6 +199,41 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
         draping_trainer.cache.load(files[0])
     draping_trainer.close()
 
+    # A rollout that came off the body is measured so, by Warp's search and by torch's alike,
+    # and a bank file like it is skipped (refused) when the config checks detachment.
+    from hyperbones.geometry.torch_proximity import TorchProximity
+    from hyperbones.training.rollouts import detached_above_hips, signed_distances_from_start
+
+    checking = HyperBonesTrainingConfig.from_dict(
+        {**values, "joint": {**values["joint"], "max_detached_pct": 5.0, "cache_size": 8}})
+    checker = JointTrainer(checking, tmp_path / "checking", progress=False)
+    cache = checker.cache
+    assert cache.detachment(rollout.physics, rollout.positions, rollout.body_vertices) < 5.0
+    lifted = rollout.positions + torch.tensor([0.0, 0.0, 3.0])
+    assert cache.detachment(rollout.physics, lifted, rollout.body_vertices) == 100.0
+    half = torch.cat([rollout.positions[:3], lifted[3:]])
+    warp_pct = cache.detachment(rollout.physics, half, rollout.body_vertices)
+    start, canonical = rollout.physics.garment.vertices, rollout.physics.body
+    distances = signed_distances_from_start(TorchProximity(canonical.faces), half, rollout.body_vertices, start,
+                                            canonical.rest_vertices)
+    torch_pct = detached_above_hips(*distances, start, float(canonical.rest_joint_positions[0, 2]))
+    assert torch_pct == pytest.approx(warp_pct) and warp_pct > 40.0
+    # A skirt's hem swinging out below the hips does not count.
+    below = rollout.positions.clone()
+    low = start[:, 2] < float(canonical.rest_joint_positions[0, 2])
+    assert low.any()
+    below[:, low] += torch.tensor([0.0, 0.3, 0.0])
+    assert cache.detachment(rollout.physics, below, rollout.body_vertices) < 5.0
+    came_off = [bank / "rollout-s9-00000.pt", bank / "rollout-s9-00001.pt"]
+    for path in came_off:
+        torch.save({**records[0], "positions": records[0]["positions"] + torch.tensor([0.0, 0.0, 3.0]).half()}, path)
+    for step in range(4):  # three good files in any order, then the bad ones are all refused and one is simulated
+        cache.refresh(checker.teacher, step)
+    assert cache.refused_files >= {str(path) for path in came_off}
+    sources = {r.source for r in cache.rollouts}
+    assert sources >= {str(f) for f in files} and not any("s9" in source for source in sources)
+    checker.close()
+
     with pytest.raises(InputFileError, match="bad.pt: not a version-1 hyperbones saved rollout"):
         torch.save({"something": 1}, tmp_path / "bad.pt")
         load_rollout(tmp_path / "bad.pt")

@@ -67,6 +67,7 @@ frames_per_step = 2
 cache_size = 2
 rollout_frames = 6
 refresh_every = 2
+max_detached_pct = 50.0
 
 [train]
 steps = 4

@@ -15,9 +15,9 @@ from hyperbones.motion.load import capture_rate
 from hyperbones.runtime.config import parse_overrides
 
 COLUMNS = [("edge_error_pct", "ε_e %"), ("area_error_pct", "ε_a %"), ("collision_pct", "ε_c % (d<0)"),
-           ("collision_1mm_pct", "ε_c % (d<1mm)"), ("strain", "strain J"), ("bending", "bending J"),
-           ("inertia", "inertia J"), ("gravity", "gravity J"), ("ms_median", "ms/frame (median)"),
-           ("ms_p95", "ms/frame (p95)")]
+           ("collision_1mm_pct", "ε_c % (d<1mm)"), ("detached_pct", "detached %"), ("hem_area_cm2", "hem area cm²"),
+           ("strain", "strain J"), ("bending", "bending J"), ("inertia", "inertia J"), ("gravity", "gravity J"),
+           ("ms_median", "ms/frame (median)"), ("ms_p95", "ms/frame (p95)")]
 
 
 SPLITS = ("validation", "test")

@@ -19,6 +19,7 @@ from hyperbones.physics.energies import (
 from hyperbones.physics.material import Material
 
 HOOD_COLLISION_THRESHOLD = 1e-3
+DETACH_MARGIN = 0.10  # m: farther from the skin than in the drape by more than this counts as come off
 """HOOD counts a vertex as colliding when its signed distance is below 1 mm."""
 
 
@@ -99,3 +100,25 @@ def mean_energies(
     Average these per sequence, then over sequences (REFERENCE.md, "Per-frame energies").
     """
     return {name: float(values.mean()) for name, values in per_frame_energies(x, rest, dt, material, g).items()}
+
+
+def detached_pct(distances: torch.Tensor, drape_distances: torch.Tensor, margin: float = DETACH_MARGIN) -> float:
+    """(T,V) signed distances to the posed body, (V,) the same vertices' in the drape -> % of
+    vertex-frames farther from the skin than in the drape by more than ``margin`` (m).
+
+    A garment that slides off an arm or hangs from one shoulder stays near its rest lengths and
+    outside the body, so ε_e, ε_a and ε_c do not see it; this does. A vertex beyond the search
+    range (infinite distance) counts as come off.
+    """
+    return float(100.0 * ((distances - drape_distances.to(distances)) > margin).float().mean())
+
+
+def enclosed_area(loop_points: torch.Tensor) -> torch.Tensor:
+    """(...,L,3) an ordered closed loop -> (...) the area it encloses seen from above (m², the
+    shoelace formula on x, y; lobes of a loop that crosses itself partly cancel).
+
+    For a hem: a skirt spanning between the legs encloses far more than one wrapped around a
+    leg like a trouser leg, which its convex hull would not tell apart.
+    """
+    x, y = loop_points[..., 0], loop_points[..., 1]
+    return 0.5 * (x * y.roll(-1, -1) - x.roll(-1, -1) * y).sum(-1).abs()

@@ -6,7 +6,9 @@ import torch
 
 from hyperbones.geometry.proximity import BodyProximity
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.metrics import HOOD_COLLISION_THRESHOLD, area_error_pct, collision_pct, edge_error_pct, mean_energies
+from hyperbones.physics.metrics import (
+    HOOD_COLLISION_THRESHOLD, area_error_pct, collision_pct, detached_pct, edge_error_pct, enclosed_area, mean_energies,
+)
 
 
 RUNAWAY_SPEED = 15.0  # m/s: faster than any body part in the clips (a kick's foot reaches ~8)
@@ -46,7 +48,8 @@ def kinetic_energy(garment_vertices: torch.Tensor, masses: torch.Tensor, dt: flo
 
 
 def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_vertices: torch.Tensor,
-                     body_faces: torch.Tensor, origin: torch.Tensor, dt: float) -> dict[str, float]:
+                     body_faces: torch.Tensor, origin: torch.Tensor, dt: float,
+                     drape_distances: torch.Tensor | None = None, hem: torch.Tensor | None = None) -> dict[str, float]:
     """Every metric of REFERENCE.md for one sequence.
 
     Args:
@@ -54,12 +57,19 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         body_vertices: (T,Vb,3) posed body; body_faces: (Fb,3).
         origin: (3,) the body root at frame 0: gravity energy is measured from it.
         dt: seconds per frame.
+        drape_distances: (V,) each vertex's signed distance to the body in the drape the
+            sequence started from; given, ``detached_pct`` is reported.
+        hem: (L,) the garment's hem loop in order (``geometry.boundary.lowest_loop``); given,
+            ``hem_area_cm2`` is reported.
 
     Returns:
         edge_error_pct, area_error_pct (GAPS), collision_pct (d < 0), collision_1mm_pct
         (HOOD: d < 1 mm), and the mean per-frame strain, bending, inertia, gravity (J,
         HOOD protocol, frames t >= 2); ``finite`` (no NaN/inf) and ``max_speed`` (m/s, the
-        fastest vertex over the sequence).
+        fastest vertex over the sequence); ``detached_pct`` (% of vertex-frames more than
+        ``DETACH_MARGIN`` farther from the skin than in the drape) when ``drape_distances`` is given;
+        ``hem_area_cm2`` (the mean over frames of the area the hem loop encloses seen from above)
+        when ``hem`` is given.
     """
     x = garment_vertices.double()
     distances = body_signed_distances(garment_vertices, body_vertices, body_faces)
@@ -71,6 +81,10 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         "finite": bool(torch.isfinite(x).all()),
         "max_speed": float(vertex_speeds(x, dt).max()) if x.shape[0] > 1 else 0.0,
     }
+    if drape_distances is not None:
+        metrics["detached_pct"] = detached_pct(distances, drape_distances)
+    if hem is not None:
+        metrics["hem_area_cm2"] = float(enclosed_area(x[:, hem]).mean()) * 1e4
     if x.shape[0] >= 3:
         energies = mean_energies(x - origin.double(), rest, dt=dt)
         metrics.update({"strain": float(energies["stretching"]), "bending": float(energies["bending"]),

@@ -204,6 +204,10 @@ class JointConfig:
     is not kept (``training.rollouts``): A would learn a garment creeping up the body as its place. 0: no check."""
     max_gap: float = 0.0
     """The same for a garment more than this (m, RMS over vertices) from its skinned pose (slid off); 0: no check."""
+    max_detached_pct: float = 0.0
+    """A rollout with more than this share (%) of its vertex-frames above the hips come off the body (over 10 cm
+    farther from the skin than at its start: ``training.rollouts.detached_above_hips``) is not kept, in a bank or
+    in the cache; 0: no check."""
     bank: str = ""
     """Folder of saved teacher rollouts (``hyperbones rollouts``): refreshes load the ones not yet cached and
     simulate only when none is left. Empty: every rollout is simulated as training goes."""

@@ -3,8 +3,8 @@
 A batch of identities (random pack bodies, templates, fabrics, clip windows of one length)
 is rolled out by C as one concatenated garment (``training.episode_batch``), with the same
 start, settling step, strain limiting and contact as ``runtime.teacher_rollout.StepRollout``,
-so a GPU makes hundreds of rollouts in the time one takes; the drift check of
-``training.rollouts`` keeps or refuses each. Each kept rollout gets its identity's geometry
+so a GPU makes hundreds of rollouts in the time one takes; the drift and
+detachment checks of ``training.rollouts`` keep or refuse each. Each kept rollout gets its identity's geometry
 (virtual bones, UV maps, canonical graph) from the pack: the bones' picks and geodesic
 distances come from the template on the default body (geodesics need potpourri3d), their
 skinning weights from the skin under them on the rollout's body.
@@ -29,7 +29,9 @@ from hyperbones.training.config import JointConfig
 from hyperbones.training.episode import Identity
 from hyperbones.training.episode_batch import EpisodeBatch
 from hyperbones.training.pack_data import PackData
-from hyperbones.training.rollouts import RolloutCache, TeacherRollout, drift
+from hyperbones.training.rollouts import (
+    RolloutCache, TeacherRollout, detached_above_hips, drift, refused, signed_distances_from_start,
+)
 
 
 @torch.no_grad()
@@ -107,7 +109,7 @@ class PackRollouts(RolloutCache):
 
     def simulate(self, teacher, step: int) -> list[TeacherRollout]:
         """One batch of rollouts of ``teacher`` (in eval mode for it); those that pass the drift
-        check (all of them when none does, as ``RolloutCache`` keeps its last draw)."""
+        and detachment checks (all of them when none does, as ``RolloutCache`` keeps its last draw)."""
         data = self.data
         identities = [data.sample_identity() for _ in range(self.batch)]
         windows = []
@@ -130,6 +132,7 @@ class PackRollouts(RolloutCache):
         finally:
             teacher.train(was_training)
         self.simulated += len(identities)
+        detached = self.batch_detachment(identities, batch, proximity, positions, bodies)
         made, kept = [], []
         for index, (identity, ours) in enumerate(zip(identities, torch.split(positions, batch.sizes, dim=1))):
             rise, gap = drift(ours, skinned[index])
@@ -139,12 +142,24 @@ class PackRollouts(RolloutCache):
                                      root.to(self.device), transforms, vertices, ours,
                                      identity.garment.edges().to(self.device), window.name, step)
             made.append(rollout)
-            too_high = self.config.max_rise > 0 and rise > self.config.max_rise
-            too_far = self.config.max_gap > 0 and gap > self.config.max_gap
-            if not (too_high or too_far):
+            if not refused(self.config, rise, gap, detached[index]):
                 kept.append(rollout)
         self.refused += len(made) - len(kept)
         return kept or made
+
+    def batch_detachment(self, identities: list[Identity], batch: EpisodeBatch, proximity: BatchedProximity,
+                         positions: torch.Tensor, bodies: torch.Tensor) -> list[float]:
+        """Each rollout's share of vertex-frames come off above the hips (``detached_above_hips``)
+        from the batch's garments (T,N,3) on their bodies (T,B·Vb,3), against where each started
+        on its canonical body; zeros without the check."""
+        if self.config.max_detached_pct <= 0:
+            return [0.0] * len(identities)
+        starts = [identity.garment.vertices.to(self.device) for identity in identities]
+        canonical = torch.cat([identity.body.rest_vertices for identity in identities]).to(self.device)
+        distances, reference = signed_distances_from_start(proximity, positions, bodies, torch.cat(starts), canonical)
+        return [detached_above_hips(ours, theirs, start, float(identity.body.rest_joint_positions[0, 2]))
+                for ours, theirs, start, identity in zip(distances.split(batch.sizes, 1), reference.split(batch.sizes),
+                                                         starts, identities)]
 
     def refresh(self, teacher, step: int) -> TeacherRollout:
         """Add a rollout (simulating a new batch when none is waiting), dropping the oldest when full."""

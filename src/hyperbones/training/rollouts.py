@@ -8,9 +8,10 @@ pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the
 
 A rollout is kept only if, over its last third, the garment stays near its skinned pose
 (``drift``: its mean height above it within ``max_rise``, its RMS distance within
-``max_gap``); the teacher lets some garments creep up the body or slide off, and such a
-rollout would teach A a wrong place for the garment. A refused one is replaced by a new
-draw (up to ``MAX_DRAWS`` in all).
+``max_gap``), and if few of its vertex-frames above the hips came off the body (``detachment``:
+at most ``max_detached_pct``); the teacher lets some garments creep up the body or slide off, and
+such a rollout would teach A a wrong place for the garment. A refused one is replaced by a
+new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.models.teacher import Teacher
 from hyperbones.physics.material import Material
+from hyperbones.physics.metrics import detached_pct
 from hyperbones.runtime.identity import IdentityGeometry
 from hyperbones.training.config import JointConfig
 from hyperbones.training.episode import Identity as PhysicsIdentity
@@ -81,6 +83,7 @@ class SimulatedRollout:
     positions: torch.Tensor
     rise: float
     gap: float
+    detached: float = 0.0  # % of vertex-frames come off the body (``detachment``)
 
 
 def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]:
@@ -90,6 +93,44 @@ def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]
     tail = slice(positions.shape[0] - max(1, positions.shape[0] // 3), None)
     offset = positions[tail] - skinned[tail]
     return float(offset[..., 2].mean()), float(offset.square().sum(-1).mean(-1).sqrt().mean())
+
+
+DETACH_SEARCH = 0.5  # m: the search range of ``detachment``; a vertex beyond it counts as come off
+
+
+def signed_distances_from_start(search, positions: torch.Tensor, bodies: torch.Tensor, start: torch.Tensor,
+                                canonical_body: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """(T,N) signed distances of a rollout's garment ``positions`` (T,N,3) to its posed ``bodies``
+    (T,Nb,3), and (N,) those of its ``start`` (the garment it began from) to the ``canonical_body``
+    (Nb,3), with ``search`` (any nearest-face search over the bodies' faces: Warp's
+    ``BodyProximity``, torch's, or a batch's ``BatchedProximity``); inf beyond ``DETACH_SEARCH``."""
+    search.update(canonical_body)
+    reference = search.query(start, max_distance=DETACH_SEARCH).signed_distance
+    distances = []
+    for frame in range(positions.shape[0]):  # one refit and one batched query a frame, offline
+        search.update(bodies[frame])
+        distances.append(search.query(positions[frame], max_distance=DETACH_SEARCH).signed_distance)
+    return torch.stack(distances), reference
+
+
+def detached_above_hips(distances: torch.Tensor, reference: torch.Tensor, start: torch.Tensor,
+                        hips_height: float) -> float:
+    """``detached_pct`` of (T,V) ``distances`` against (V,) ``reference``, over the vertices whose
+    ``start`` (V,3) lies above the body's hips head (``hips_height``, m, canonical).
+
+    Above the hips a garment rests on the body, so cloth far from the skin there has come off
+    (an open shirt streaming behind a walk like a cape); below, a skirt's hem swings away from
+    the legs as it should (the teacher's long skirt on the walk: 27 % of all its vertex-frames
+    more than 10 cm out, 1.3 % of those above the hips). 0 when no vertex lies above the hips.
+    """
+    upper = start[:, 2].to(distances.device) > hips_height
+    return detached_pct(distances[:, upper], reference[upper]) if bool(upper.any()) else 0.0
+
+
+def refused(config: JointConfig, rise: float, gap: float, detached: float) -> bool:
+    """Whether a rollout with this ``drift`` and ``detached`` share (%) fails the config's checks."""
+    return ((config.max_rise > 0 and rise > config.max_rise) or (config.max_gap > 0 and gap > config.max_gap)
+            or (config.max_detached_pct > 0 and detached > config.max_detached_pct))
 
 
 class RolloutCache:
@@ -106,19 +147,35 @@ class RolloutCache:
         self.num_bones, self.uv_resolution = num_bones, uv_resolution
         self.device, self.settle_dt = device, settle_dt
         self.rollouts: list[TeacherRollout] = []
-        self.refused = 0  # rollouts not kept for their drift
+        self.refused = 0  # rollouts not kept for their drift or detachment
+        self.refused_files: set[str] = set()  # bank files not loaded again for the same reasons
+        self._search = None  # Warp's body search for ``detachment``, made on first use
 
     def simulate(self, teacher: Teacher) -> SimulatedRollout:
-        """C over a random clip window on a random identity, redrawn while its ``drift``
-        fails the config's checks (the last of ``MAX_DRAWS`` draws is kept whatever it is)."""
+        """C over a random clip window on a random identity, redrawn while its ``drift`` or
+        ``detachment`` fails the config's checks (the last of ``MAX_DRAWS`` draws is kept
+        whatever it is)."""
         for _ in range(MAX_DRAWS - 1):
             draw = self._draw(teacher)
-            too_high = self.config.max_rise > 0 and draw.rise > self.config.max_rise
-            too_far = self.config.max_gap > 0 and draw.gap > self.config.max_gap
-            if not (too_high or too_far):
+            if not refused(self.config, draw.rise, draw.gap, draw.detached):
                 return draw
             self.refused += 1
         return self._draw(teacher)
+
+    def detachment(self, identity: PhysicsIdentity, positions: torch.Tensor, bodies: torch.Tensor) -> float:
+        """% of the vertex-frames of C's garment ``positions`` (T,V,3) on ``identity``'s posed
+        ``bodies`` (T,Vb,3), above the hips, more than 10 cm farther from the skin than its start
+        was on the canonical body (``detached_above_hips``); 0 without the check
+        (``max_detached_pct`` 0)."""
+        if self.config.max_detached_pct <= 0:
+            return 0.0
+        if self._search is None:
+            from hyperbones.geometry.proximity import BodyProximity  # Warp
+
+            self._search = BodyProximity(identity.body.faces)
+        start, body = identity.garment.vertices, identity.body
+        distances, reference = signed_distances_from_start(self._search, positions, bodies, start, body.rest_vertices)
+        return detached_above_hips(distances, reference, start, float(body.rest_joint_positions[0, 2]))
 
     def make(self, teacher: Teacher, step: int) -> TeacherRollout:
         """A new rollout of ``teacher`` that passes the drift check (the last of ``MAX_DRAWS`` otherwise)."""
@@ -146,7 +203,8 @@ class RolloutCache:
         finally:
             teacher.train(was_training)
         rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
-        return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap)
+        return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap,
+                                self.detachment(identity, positions, posed.vertices))
 
     def assemble(self, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor, root: torch.Tensor,
                  positions: torch.Tensor, step: int = 0, posed: PosedBody | None = None,
@@ -179,13 +237,19 @@ class RolloutCache:
 
     def refresh(self, teacher: Teacher, step: int) -> TeacherRollout:
         """Add a rollout (from the bank when the config names one and it holds a rollout not
-        in the cache, else a new one), dropping the oldest when the cache is full."""
+        in the cache and not refused for its ``detachment``, else a new one), dropping the
+        oldest when the cache is full."""
         rollout = None
         if self.config.bank:
-            cached = {r.source for r in self.rollouts}
+            cached = {r.source for r in self.rollouts} | self.refused_files
             unused = [path for path in bank_files(self.config.bank) if str(path) not in cached]
-            if unused:
-                rollout = self.load(self.data.random.choice(unused), step)
+            while unused and rollout is None:
+                rollout = self.load(unused.pop(self.data.random.randrange(len(unused))), step)
+                detached = self.detachment(rollout.physics, rollout.positions, rollout.body_vertices)
+                if refused(self.config, 0.0, 0.0, detached):  # its drift was checked when it was made
+                    self.refused_files.add(rollout.source)
+                    self.refused += 1
+                    rollout = None
         if rollout is None:
             rollout = self.make(teacher, step)
         return self.admit(rollout)
