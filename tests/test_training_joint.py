@@ -195,9 +195,15 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert records[0]["draped"] is False
     draping = HyperBonesTrainingConfig.from_dict({**values, "data": {**values["data"], "drape": True}})
     draping_trainer = JointTrainer(draping, tmp_path / "draping", progress=False)
-    with pytest.raises(InputFileError, match="rollout-s3-00000.pt: rollout started from an undraped .* data.drape = true"):
-        draping_trainer.cache.load(files[0])
+    carried = draping_trainer.cache.load(files[0])  # rebuilt as it started, whatever the config says
+    assert carried.physics.draped is False
+    assert torch.equal(carried.physics.garment.vertices, rollout.physics.garment.vertices)
     draping_trainer.close()
+    # A draped share in the same bank (hyperbones rollouts --drape): the undraped run rebuilds it draped.
+    [draped_file] = generate_bank(draping, bank, count=1, seed=4, progress=False)
+    assert load_rollout(draped_file)["draped"] is True
+    mixed = trainer.cache.load(draped_file)
+    assert mixed.physics.draped is True and not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
 
     # A rollout that came off the body is measured so, by Warp's search and by torch's alike,
     # and a bank file like it is skipped (refused) when the config checks detachment.

@@ -102,6 +102,8 @@ def run_rollouts(args) -> int:
             raise ParameterError(f"--templates {', '.join(unknown)}: not among the config's data.templates "
                                  f"({', '.join(config.data.templates)})")
         config = replace(config, data=replace(config.data, templates=templates))
+    if args.drape:
+        config = replace(config, data=replace(config.data, drape=True))
     generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet)
     return 0
 
@@ -119,6 +121,9 @@ def add_rollouts(sub) -> None:
     rollouts.add_argument("--templates", default=None,
                           help="comma list: draw only these of the config's garment templates (default: all), "
                                "to add rollouts of garments the model does worst on")
+    rollouts.add_argument("--drape", action="store_true",
+                          help="start every rollout from its garment draped on the body (data.drape), as simulate "
+                               "does; a bank may mix draped and carried starts, and training rebuilds each as it was")
     options.add_quiet(rollouts)
     rollouts.set_defaults(func=run_rollouts)
 

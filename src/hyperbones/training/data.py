@@ -119,19 +119,21 @@ class TeacherData(EpisodeDraws):
         name, vertices = self.random.choice(sorted(self.sources))
         return self.identity_for(name, vertices, self.sample_shape(), self.sample_material())
 
-    def identity_for(self, name: str, vertices: int, shape: BodyShape, material: Material) -> Identity:
+    def identity_for(self, name: str, vertices: int, shape: BodyShape, material: Material,
+                     drape: bool | None = None) -> Identity:
         """Template ``name`` at resolution ``vertices`` (one of the config's) carried to the
-        body of ``shape``, in ``material`` (and draped there with ``data.drape``)."""
+        body of ``shape``, in ``material``, and draped there when ``drape`` (default: ``data.drape``)."""
+        drape = self.config.drape if drape is None else drape
         if (name, vertices) not in self.sources:
             raise ParameterError(f"no training garment {name!r} at {vertices} vertices in this config")
         source = self.sources[(name, vertices)]
         body = Body(shape)
         rest_vertices = source.follower.place(body)
         garment = replace(source.garment.with_vertices(rest_vertices), material=material)
-        if self.config.drape:
+        if drape:
             garment = garment.with_vertices(draped_vertices(garment, body, vertices))
         return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
-                              source.skin_weights, material, garment, vertices, self.config.drape)
+                              source.skin_weights, material, garment, vertices, drape)
 
     def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
         """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None)."""

@@ -220,15 +220,12 @@ class RolloutCache:
                               positions.float(), garment.edges(), motion, step, source=source)
 
     def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
-        """A rollout saved by ``save_rollout``, rebuilt on this config's garments."""
+        """A rollout saved by ``save_rollout``, rebuilt on this config's garments as it started
+        (draped or carried, whatever ``data.drape`` says: a bank may hold both)."""
         record = load_rollout(path)
         draped = record.get("draped", False)  # banks from before the flag are undraped
-        if draped != self.data.config.drape:
-            started = "a draped garment" if draped else "an undraped (carried) garment"
-            raise InputFileError(path, f"rollout started from {started}, but this config has data.drape = "
-                                       f"{str(self.data.config.drape).lower()}")
         identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
-                                          Material(**record["material"]))
+                                          Material(**record["material"]), drape=draped)
         if identity.rest.rest_vertices.shape[0] != record["positions"].shape[1]:
             raise InputFileError(path, f"{record['positions'].shape[1]} garment vertices, but {record['template']} at "
                                        f"{record['resolution']} has {identity.rest.rest_vertices.shape[0]} here")
@@ -309,10 +306,11 @@ def load_rollout(path: str | Path) -> dict:
 
 
 def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progress: bool = True) -> list[Path]:
-    """Simulate ``count`` drift-checked rollouts of the config's teacher (``train.init_from``)
-    into ``folder`` as ``rollout-s<seed>-<index>.pt``. Run again with the same seed, it
-    goes on after the files already there (with fresh draws), so several processes with
-    different seeds, or one process over several sessions, fill one bank."""
+    """Simulate ``count`` drift- and detachment-checked rollouts of the config's teacher
+    (``train.init_from``) into ``folder`` as ``rollout-s<seed>-<index>.pt``. Run again with the
+    same seed, it goes on after the files already there (with fresh draws), so several
+    processes with different seeds (and data settings, such as ``data.drape``), or one
+    process over several sessions, fill one bank."""
     from tqdm import tqdm
 
     from hyperbones.models.loading import teacher_from_checkpoint
