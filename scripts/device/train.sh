@@ -23,9 +23,11 @@ HYPERBONES_CONFIG=configs/hyperbones-small.toml
 # Phase 2 on a GPU: Module A learns 64 cached frames a step, 8 from each of 8 rollouts (one batch through A,
 # one body search), from a cache of 48 rollouts with one new every 8 steps. The whole cache is made before
 # the first step: 48 fit one simulated batch of 64 with room for the drift check's refusals. The CPU keeps
-# the config's 4 frames (docs/experiments/2026-11-28-phase2-frames-in-batches.md).
+# the config's 4 frames (docs/experiments/2026-11-28-phase2-frames-in-batches.md). Rollouts whose garment came
+# off above the hips are refused too (docs/experiments/2026-11-29-garments-that-come-off.md); the config
+# itself stays the shipped model's recipe, which had no such check.
 GPU_PHASE2=(--set=joint.frames_per_step=64 --set=joint.frames_per_rollout=8 --set=joint.cache_size=48
-            --set=joint.refresh_every=8)
+            --set=joint.refresh_every=8 --set=joint.max_detached_pct=10)
 PYTHON="${PYTHON:-python3}"
 FOLDER="${TRAIN_FOLDER:-.device/train}"
 mode=run device=cuda quick="" phase=""

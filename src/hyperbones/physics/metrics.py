@@ -19,8 +19,9 @@ from hyperbones.physics.energies import (
 from hyperbones.physics.material import Material
 
 HOOD_COLLISION_THRESHOLD = 1e-3
-DETACH_MARGIN = 0.10  # m: farther from the skin than in the drape by more than this counts as come off
 """HOOD counts a vertex as colliding when its signed distance is below 1 mm."""
+DETACH_MARGIN = 0.10
+"""``detached_pct`` counts a vertex as come off when it is this much (m) farther from the skin than in the drape."""
 
 
 def edge_error_pct(x: torch.Tensor, rest: ClothRest) -> torch.Tensor:

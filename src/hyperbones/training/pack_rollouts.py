@@ -3,8 +3,8 @@
 A batch of identities (random pack bodies, templates, fabrics, clip windows of one length)
 is rolled out by C as one concatenated garment (``training.episode_batch``), with the same
 start, settling step, strain limiting and contact as ``runtime.teacher_rollout.StepRollout``,
-so a GPU makes hundreds of rollouts in the time one takes; the drift and
-detachment checks of ``training.rollouts`` keep or refuse each. Each kept rollout gets its identity's geometry
+so a GPU makes hundreds of rollouts in the time one takes; the drift and detachment checks
+of ``training.rollouts`` keep or refuse each. Each kept rollout gets its identity's geometry
 (virtual bones, UV maps, canonical graph) from the pack: the bones' picks and geodesic
 distances come from the template on the default body (geodesics need potpourri3d), their
 skinning weights from the skin under them on the rollout's body.

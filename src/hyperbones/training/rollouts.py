@@ -178,7 +178,8 @@ class RolloutCache:
         return detached_above_hips(distances, reference, start, float(body.rest_joint_positions[0, 2]))
 
     def make(self, teacher: Teacher, step: int) -> TeacherRollout:
-        """A new rollout of ``teacher`` that passes the drift check (the last of ``MAX_DRAWS`` otherwise)."""
+        """A new rollout of ``teacher`` that passes the drift and detachment checks (the last of ``MAX_DRAWS``
+        otherwise)."""
         draw = self.simulate(teacher)
         return self.assemble(draw.identity, draw.motion, draw.joint_rotations, draw.root, draw.positions, step,
                              posed=draw.posed)
