@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from hyperbones.physics.cloth import ClothRest
-from hyperbones.physics.sequence_metrics import RUNAWAY_SPEED, body_signed_distances, runaway_problem, sequence_metrics
+from hyperbones.physics.sequence_metrics import RUNAWAY_SPEED, runaway_problem, sequence_metrics
 from hyperbones.jobs.simulate import run_simulation
 
 
@@ -46,10 +46,10 @@ def test_detached_pct_counts_the_vertex_frames_that_left_the_skin(skinned_skirt,
     assert 500 < result.metrics["hem_area_cm2"] < 5000  # the hem loop seen from above, about the hips' girth
     x = result.garment_vertices.double()
     rest = ClothRest.from_mesh(result.garment.vertices.double(), result.garment.faces)
-    drape = body_signed_distances(result.garment.vertices[None], body.rest_vertices[None], body.faces)[0]
     off = x.clone()
     off[7:, :, 2] += 3.0  # the last three frames' skirt far above the head, beyond any search
     off[4, :, 0] += 0.05  # one frame shifted by less than the margin: still on
     metrics = sequence_metrics(off, rest, result.body_vertices, result.body_faces,
-                               origin=result.joint_positions[0, 0], dt=1.0 / result.fps, drape_distances=drape)
+                               origin=result.joint_positions[0, 0], dt=1.0 / result.fps,
+                               drape=(result.garment.vertices, body.rest_vertices))
     assert metrics["detached_pct"] == pytest.approx(30.0, abs=1.0)

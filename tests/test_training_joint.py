@@ -203,7 +203,8 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     [draped_file] = generate_bank(draping, bank, count=1, seed=4, progress=False)
     assert load_rollout(draped_file)["draped"] is True
     mixed = trainer.cache.load(draped_file)
-    assert mixed.physics.draped is True and not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
+    assert mixed.physics.draped is True
+    assert not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
 
     # A rollout that came off the body is measured so, by Warp's search and by torch's alike,
     # and a bank file like it is skipped (refused) when the config checks detachment.

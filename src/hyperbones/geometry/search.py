@@ -12,6 +12,7 @@ import torch
 from hyperbones.errors import ParameterError
 
 SEARCHES = ("auto", "warp", "torch")
+SEQUENCE_RANGE = 0.5  # m: ``signed_distances_along``'s search range; farther points get inf
 
 
 def search_backend(search: str, device: str | torch.device) -> str:
@@ -31,4 +32,17 @@ def search_backend(search: str, device: str | torch.device) -> str:
         return "torch"
 
 
-__all__ = ["SEARCHES", "search_backend"]
+def signed_distances_along(search, points: torch.Tensor, bodies: torch.Tensor,
+                           max_distance: float = SEQUENCE_RANGE) -> torch.Tensor:
+    """(T,N,3) points, (T,Nb,3) bodies -> (T,N) signed distance of each point to its frame's body
+    (inf beyond ``max_distance``), with ``search``: any nearest-face search over the bodies'
+    faces (Warp's ``BodyProximity``, ``TorchProximity``, a batch's ``BatchedProximity``). One
+    refit and one batched query a frame: for whole sequences after the fact (metrics, checks)."""
+    distances = []
+    for frame in range(points.shape[0]):
+        search.update(bodies[frame])
+        distances.append(search.query(points[frame], max_distance=max_distance).signed_distance)
+    return torch.stack(distances)
+
+
+__all__ = ["SEARCHES", "SEQUENCE_RANGE", "search_backend", "signed_distances_along"]

@@ -27,7 +27,7 @@ from hyperbones.jobs.methods import METHODS
 from hyperbones.motion.load import DEFAULT_BLEND_IN, load_motion
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
-from hyperbones.physics.sequence_metrics import body_signed_distances, runaway_problem, sequence_metrics
+from hyperbones.physics.sequence_metrics import runaway_problem, sequence_metrics
 from hyperbones.runtime.config import parse_overrides
 
 GARMENT_COLOR = (0.25, 0.45, 0.8)
@@ -80,10 +80,10 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                              device=device, progress=progress, **extra)
     garment_vertices, frame_ms = _timed_frames(solver, posed, method, progress)
     rest = ClothRest.from_mesh(rest_vertices.double(), draped.faces, cloth)
-    drape_distances = body_signed_distances(draped.vertices[None], the_body.rest_vertices[None], the_body.faces)[0]
     metrics = sequence_metrics(garment_vertices, rest, posed.vertices, the_body.faces,
                                origin=posed.joint_positions[0, 0], dt=1.0 / the_motion.fps,
-                               drape_distances=drape_distances, hem=lowest_loop(draped.faces, draped.vertices))
+                               drape=(draped.vertices, the_body.rest_vertices),
+                               hem=lowest_loop(draped.faces, draped.vertices))
     metrics.update({"frames": the_motion.num_frames, "ms_per_frame": float(frame_ms.mean()),
                     "ms_median": float(frame_ms.median()), "ms_p95": float(torch.quantile(frame_ms, 0.95)),
                     "method": method, "garment": garment if Path(garment).suffix == "" else Path(garment).name,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import torch
 
 from hyperbones.geometry.proximity import BodyProximity
+from hyperbones.geometry.search import signed_distances_along
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.metrics import (
     HOOD_COLLISION_THRESHOLD, area_error_pct, collision_pct, detached_pct, edge_error_pct, enclosed_area, mean_energies,
@@ -25,15 +26,11 @@ def runaway_problem(metrics: dict) -> str | None:
     return None
 
 
-def body_signed_distances(garment_vertices: torch.Tensor, body_vertices: torch.Tensor,
-                          body_faces: torch.Tensor) -> torch.Tensor:
-    """(T,V,3), (T,Vb,3), (Fb,3) -> (T,V) signed distance of each garment vertex to the posed body."""
-    proximity = BodyProximity(body_faces)
-    distances = []
-    for frame in range(garment_vertices.shape[0]):  # one BVH refit and one batched query per frame
-        proximity.update(body_vertices[frame])
-        distances.append(proximity.query(garment_vertices[frame], max_distance=0.5).signed_distance)
-    return torch.stack(distances)
+def body_signed_distances(garment_vertices: torch.Tensor, body_vertices: torch.Tensor, body_faces: torch.Tensor,
+                          proximity: BodyProximity | None = None) -> torch.Tensor:
+    """(T,V,3), (T,Vb,3), (Fb,3) -> (T,V) signed distance of each garment vertex to the posed body
+    (inf beyond 0.5 m); ``proximity``: a search over ``body_faces`` to reuse."""
+    return signed_distances_along(proximity or BodyProximity(body_faces), garment_vertices, body_vertices)
 
 
 def vertex_speeds(garment_vertices: torch.Tensor, dt: float) -> torch.Tensor:
@@ -49,7 +46,8 @@ def kinetic_energy(garment_vertices: torch.Tensor, masses: torch.Tensor, dt: flo
 
 def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_vertices: torch.Tensor,
                      body_faces: torch.Tensor, origin: torch.Tensor, dt: float,
-                     drape_distances: torch.Tensor | None = None, hem: torch.Tensor | None = None) -> dict[str, float]:
+                     drape: tuple[torch.Tensor, torch.Tensor] | None = None,
+                     hem: torch.Tensor | None = None) -> dict[str, float]:
     """Every metric of REFERENCE.md for one sequence.
 
     Args:
@@ -57,7 +55,7 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         body_vertices: (T,Vb,3) posed body; body_faces: (Fb,3).
         origin: (3,) the body root at frame 0: gravity energy is measured from it.
         dt: seconds per frame.
-        drape_distances: (V,) each vertex's signed distance to the body in the drape the
+        drape: the garment's drape (V,3) and the canonical body it rests on (Vb,3), where the
             sequence started from; given, ``detached_pct`` is reported.
         hem: (L,) the garment's hem loop in order (``geometry.boundary.lowest_loop``); given,
             ``hem_area_cm2`` is reported.
@@ -67,12 +65,13 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         (HOOD: d < 1 mm), and the mean per-frame strain, bending, inertia, gravity (J,
         HOOD protocol, frames t >= 2); ``finite`` (no NaN/inf) and ``max_speed`` (m/s, the
         fastest vertex over the sequence); ``detached_pct`` (% of vertex-frames more than
-        ``DETACH_MARGIN`` farther from the skin than in the drape) when ``drape_distances`` is given;
+        ``DETACH_MARGIN`` farther from the skin than in the drape) when ``drape`` is given;
         ``hem_area_cm2`` (the mean over frames of the area the hem loop encloses seen from above)
         when ``hem`` is given.
     """
     x = garment_vertices.double()
-    distances = body_signed_distances(garment_vertices, body_vertices, body_faces)
+    proximity = BodyProximity(body_faces)
+    distances = body_signed_distances(garment_vertices, body_vertices, body_faces, proximity)
     metrics = {
         "edge_error_pct": float(edge_error_pct(x, rest)),
         "area_error_pct": float(area_error_pct(x, rest)),
@@ -81,8 +80,10 @@ def sequence_metrics(garment_vertices: torch.Tensor, rest: ClothRest, body_verti
         "finite": bool(torch.isfinite(x).all()),
         "max_speed": float(vertex_speeds(x, dt).max()) if x.shape[0] > 1 else 0.0,
     }
-    if drape_distances is not None:
-        metrics["detached_pct"] = detached_pct(distances, drape_distances)
+    if drape is not None:
+        drape_vertices, canonical_body = drape
+        reference = body_signed_distances(drape_vertices[None], canonical_body[None], body_faces, proximity)[0]
+        metrics["detached_pct"] = detached_pct(distances, reference)
     if hem is not None:
         metrics["hem_area_cm2"] = float(enclosed_area(x[:, hem]).mean()) * 1e4
     if x.shape[0] >= 3:

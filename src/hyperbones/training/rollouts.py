@@ -25,6 +25,7 @@ import torch
 from hyperbones.body.anny_body import PosedBody
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import InputFileError, ParameterError
+from hyperbones.geometry.search import signed_distances_along
 from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.models.teacher import Teacher
 from hyperbones.physics.material import Material
@@ -95,22 +96,13 @@ def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]
     return float(offset[..., 2].mean()), float(offset.square().sum(-1).mean(-1).sqrt().mean())
 
 
-DETACH_SEARCH = 0.5  # m: the search range of ``detachment``; a vertex beyond it counts as come off
-
-
 def signed_distances_from_start(search, positions: torch.Tensor, bodies: torch.Tensor, start: torch.Tensor,
                                 canonical_body: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """(T,N) signed distances of a rollout's garment ``positions`` (T,N,3) to its posed ``bodies``
     (T,Nb,3), and (N,) those of its ``start`` (the garment it began from) to the ``canonical_body``
-    (Nb,3), with ``search`` (any nearest-face search over the bodies' faces: Warp's
-    ``BodyProximity``, torch's, or a batch's ``BatchedProximity``); inf beyond ``DETACH_SEARCH``."""
-    search.update(canonical_body)
-    reference = search.query(start, max_distance=DETACH_SEARCH).signed_distance
-    distances = []
-    for frame in range(positions.shape[0]):  # one refit and one batched query a frame, offline
-        search.update(bodies[frame])
-        distances.append(search.query(positions[frame], max_distance=DETACH_SEARCH).signed_distance)
-    return torch.stack(distances), reference
+    (Nb,3), with ``search`` (``geometry.search.signed_distances_along``); inf beyond its range."""
+    reference = signed_distances_along(search, start[None], canonical_body[None])[0]
+    return signed_distances_along(search, positions, bodies), reference
 
 
 def detached_above_hips(distances: torch.Tensor, reference: torch.Tensor, start: torch.Tensor,
@@ -148,7 +140,7 @@ class RolloutCache:
         self.device, self.settle_dt = device, settle_dt
         self.rollouts: list[TeacherRollout] = []
         self.refused = 0  # rollouts not kept for their drift or detachment
-        self.refused_files: set[str] = set()  # bank files not loaded again for the same reasons
+        self.file_detachment: dict[str, float] = {}  # bank file -> its ``detachment``, measured once
         self._search = None  # Warp's body search for ``detachment``, made on first use
 
     def simulate(self, teacher: Teacher) -> SimulatedRollout:
@@ -161,6 +153,11 @@ class RolloutCache:
                 return draw
             self.refused += 1
         return self._draw(teacher)
+
+    @property
+    def refused_files(self) -> set[str]:
+        """Bank files refused for their ``detachment`` (not loaded again)."""
+        return {path for path, detached in self.file_detachment.items() if refused(self.config, 0.0, 0.0, detached)}
 
     def detachment(self, identity: PhysicsIdentity, positions: torch.Tensor, bodies: torch.Tensor) -> float:
         """% of the vertex-frames of C's garment ``positions`` (T,V,3) on ``identity``'s posed
@@ -243,9 +240,10 @@ class RolloutCache:
             unused = [path for path in bank_files(self.config.bank) if str(path) not in cached]
             while unused and rollout is None:
                 rollout = self.load(unused.pop(self.data.random.randrange(len(unused))), step)
-                detached = self.detachment(rollout.physics, rollout.positions, rollout.body_vertices)
-                if refused(self.config, 0.0, 0.0, detached):  # its drift was checked when it was made
-                    self.refused_files.add(rollout.source)
+                if rollout.source not in self.file_detachment:  # its drift was checked when it was made
+                    self.file_detachment[rollout.source] = self.detachment(rollout.physics, rollout.positions,
+                                                                           rollout.body_vertices)
+                if rollout.source in self.refused_files:
                     self.refused += 1
                     rollout = None
         if rollout is None:
