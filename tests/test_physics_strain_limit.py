@@ -82,3 +82,36 @@ def test_contact_planes_hold_inside_the_sweeps():
     assert float(projected[held, 2].min()) >= -1e-6
     ratios = _edge_ratios(limiter, projected)
     assert float(ratios.max()) < 1.05 and float(ratios.min()) > 0.94
+
+
+def test_compiled_sweeps_match_the_torch_sweeps(monkeypatch):
+    """On the CPU without gradients the sweeps run compiled (``physics.strain_sweeps``): the same
+    answer as torch's to float32 rounding, with pinned vertices, uneven masses and a vertex held
+    by two planes; the input is left as it was, and a gradient still flows through torch's."""
+    from hyperbones.physics import strain_limit
+    from hyperbones.physics.contact_planes import ContactPlanes
+
+    rest, faces = _grid(12)
+    generator = torch.Generator().manual_seed(3)
+    masses = 1e-4 * (0.5 + torch.rand(len(rest), generator=generator))
+    pinned = torch.zeros(len(rest), dtype=torch.bool)
+    pinned[:12] = True
+    limiter = StrainLimiter.build(*_edges(rest, faces), masses, pinned, iterations=30)
+    moved = rest * torch.tensor([1.15, 0.9, 1.0]) + 0.003 * torch.randn(rest.shape, generator=generator)
+    held = torch.tensor([30, 31, 31, 60, 90])  # vertex 31 behind two planes
+    normals = torch.nn.functional.normalize(torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.3, 0.0, 1.0],
+                                                          [0.0, 0.2, 1.0], [0.0, 0.0, 1.0]]), dim=1)
+    planes = ContactPlanes(held, moved[held] + 0.004 * normals, normals)
+    before = moved.clone()
+    compiled = limiter.project(moved, planes)
+    assert strain_limit._compiled_sweeps_apply(moved)
+    monkeypatch.setattr(strain_limit, "_HAS_NUMBA", False)
+    in_torch = limiter.project(moved, planes)
+    torch.testing.assert_close(moved, before, atol=0, rtol=0)
+    assert float((in_torch - moved).abs().max()) > 1e-3  # the sweeps did move the cloth
+    torch.testing.assert_close(compiled, in_torch, atol=2e-6, rtol=0)
+    leaf = moved.clone().requires_grad_(True)
+    monkeypatch.setattr(strain_limit, "_HAS_NUMBA", True)
+    assert not strain_limit._compiled_sweeps_apply(leaf)
+    limiter.project(leaf, planes).sum().backward()
+    assert leaf.grad is not None and torch.isfinite(leaf.grad).all()

@@ -22,8 +22,10 @@ docs/experiments/*-teacher-strain-limiter.md.
 
 from __future__ import annotations
 
+import importlib.util
 from dataclasses import dataclass, field
 
+import numpy as np
 import torch
 
 from hyperbones.geometry.sparse import to_csr
@@ -55,6 +57,9 @@ class StrainLimiter:
     difference: torch.Tensor = field(init=False, repr=False)
     # (V,E) sparse: each vertex's averaged, mass-weighted share of its edges' corrections.
     spread: torch.Tensor = field(init=False, repr=False)
+    # (E,) each end's share of its edge's correction (the second's negative): ``spread``'s values by edge.
+    share_first: torch.Tensor = field(init=False, repr=False)
+    share_second: torch.Tensor = field(init=False, repr=False)
 
     def __post_init__(self):
         first, second = self.edges[:, 0], self.edges[:, 1]
@@ -66,7 +71,9 @@ class StrainLimiter:
         self.difference = to_csr(torch.sparse_coo_tensor(
             torch.stack([edge_index.repeat(2), torch.cat([second, first])]), torch.cat([ones, -ones]),
             (count, num_vertices), check_invariants=False))
-        shares = torch.cat([w_first / w_sum / self.edge_counts[first], -w_second / w_sum / self.edge_counts[second]])
+        self.share_first = w_first / w_sum / self.edge_counts[first]
+        self.share_second = -w_second / w_sum / self.edge_counts[second]
+        shares = torch.cat([self.share_first, self.share_second])
         self.spread = to_csr(torch.sparse_coo_tensor(
             torch.stack([torch.cat([first, second]), edge_index.repeat(2)]), shares,
             (num_vertices, count), check_invariants=False))
@@ -100,8 +107,14 @@ class StrainLimiter:
 
     def project(self, positions: torch.Tensor, contact: ContactPlanes | None = None) -> torch.Tensor:
         """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps; ``contact`` (a
-        ``physics.contact_planes.ContactPlanes``), when given, is enforced after every sweep."""
+        ``physics.contact_planes.ContactPlanes``), when given, is enforced after every sweep.
+
+        On the CPU without gradients the sweeps run compiled (``physics.strain_sweeps``, where
+        numba is installed); elsewhere (a GPU, autograd) in torch. The two agree to float32
+        rounding."""
         low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
+        if _compiled_sweeps_apply(positions):
+            return self._project_compiled(positions, low, high, contact)
         x = positions
         for _ in range(self.iterations):
             along = self.difference @ x
@@ -115,6 +128,42 @@ class StrainLimiter:
             if contact is not None:
                 x = contact.project(x)
         return x
+
+    def _project_compiled(self, positions: torch.Tensor, low: torch.Tensor, high: torch.Tensor,
+                          contact: ContactPlanes | None) -> torch.Tensor:
+        """``project`` by ``physics.strain_sweeps.jacobi_sweeps`` on a copy of (V,3) float32 CPU positions."""
+        from hyperbones.physics.strain_sweeps import jacobi_sweeps
+
+        if contact is None or not len(contact.vertex):
+            plane_vertex, plane_point, plane_normal = _NO_PLANES
+        else:
+            plane_vertex = contact.vertex.to("cpu", torch.int64).numpy()
+            plane_point = contact.point.to("cpu", torch.float32).contiguous().numpy()
+            plane_normal = contact.normal.to("cpu", torch.float32).contiguous().numpy()
+        x = positions.detach().numpy().copy()  # a C-ordered copy, moved in place
+        first, second, share_first, share_second = (
+            item.to("cpu", dtype).contiguous().numpy() for item, dtype in (
+                (self.edges[:, 0], torch.int64), (self.edges[:, 1], torch.int64),
+                (self.share_first, torch.float32), (self.share_second, torch.float32)))
+        jacobi_sweeps(x, first, second, low.to(torch.float32).numpy(), high.to(torch.float32).numpy(),
+                      share_first, share_second, self.iterations, plane_vertex, plane_point, plane_normal)
+        return torch.from_numpy(x)
+
+
+_NO_PLANES = (np.zeros(0, np.int64), np.zeros((0, 3), np.float32), np.zeros((0, 3), np.float32))
+
+
+def _compiled_sweeps_apply(positions: torch.Tensor) -> bool:
+    """Whether ``StrainLimiter.project`` can run ``physics.strain_sweeps`` on (V,3) ``positions``:
+    float32 on the CPU, no gradient asked for, numba installed."""
+    if positions.device.type != "cpu" or positions.dtype != torch.float32:
+        return False
+    if positions.requires_grad and torch.is_grad_enabled():
+        return False
+    return _HAS_NUMBA
+
+
+_HAS_NUMBA = importlib.util.find_spec("numba") is not None
 
 
 __all__ = ["StrainLimiter", "STRETCH_LIMIT", "COMPRESSION_LIMIT", "LIMIT_ITERATIONS"]
