@@ -82,6 +82,7 @@ class BodyProximity:
         self._indices = self.faces.to(torch.int32).reshape(-1).contiguous()
         self._points: torch.Tensor | None = None  # Warp's mesh reads this memory in place
         self._mesh: wp.Mesh | None = None
+        self._buffers: _QueryBuffers | None = None
 
     def update(self, body_vertices: torch.Tensor) -> None:
         """Move the body to ``body_vertices`` (Vb,3): builds the BVH the first time, then refits it."""
@@ -112,39 +113,71 @@ class BodyProximity:
         """
         if self._mesh is None:
             raise RuntimeError("BodyProximity.query called before update(body_vertices)")
-        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3).contiguous()
+        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3)
         count = queries.shape[0]
-        face = torch.empty(count, dtype=torch.int32, device=self.device)
-        barycentric = torch.empty(count, 3, dtype=torch.float32, device=self.device)
-        closest = torch.empty_like(barycentric)
-        normal = torch.empty_like(barycentric)
-        signed = torch.empty(count, dtype=torch.float32, device=self.device)
         if isinstance(max_distance, torch.Tensor):
-            ranges = max_distance.detach().to(device=self.device, dtype=torch.float32).reshape(-1).contiguous()
+            ranges = max_distance.detach().reshape(-1)
             if ranges.shape[0] != count:
                 raise ValueError(f"query got {ranges.shape[0]} ranges for {count} points")
+        buffers = self._buffers_for(count)
+        buffers.points[:count].copy_(queries)
+        if isinstance(max_distance, torch.Tensor):
+            buffers.ranges[:count].copy_(ranges)
         else:
-            ranges = torch.full((count,), float(max_distance), dtype=torch.float32, device=self.device)
+            buffers.ranges[:count].fill_(float(max_distance))
         if count:
-            stream = wp.stream_from_torch(self.device) if self.device.type == "cuda" else None
-            wp.launch(
-                _nearest,
-                dim=count,
-                inputs=[self._mesh.id, _vec3(queries), wp.from_torch(ranges), int(self.sign == "winding")],
-                outputs=[wp.from_torch(face), _vec3(barycentric), _vec3(closest), _vec3(normal), wp.from_torch(signed)],
-                device=wp.device_from_torch(self.device),
-                stream=stream,
-            )
-            if stream is None:
+            buffers.launch.set_dim(count)
+            if self.device.type == "cuda":
+                buffers.launch.launch(stream=wp.stream_from_torch(self.device))
+            else:
+                buffers.launch.launch()
                 wp.synchronize_device("cpu")
-        out = dict(device=points.device, dtype=points.dtype if points.is_floating_point() else torch.float32)
+        # Copies: the buffers are the next query's.
+        out = dict(device=points.device, dtype=points.dtype if points.is_floating_point() else torch.float32,
+                   copy=True)
         lead = points.shape[:-1]
         return Nearest(
-            face=face.to(device=points.device, dtype=torch.int64).reshape(lead),
-            point=closest.to(**out).reshape(*lead, 3),
-            barycentric=barycentric.to(**out).reshape(*lead, 3),
-            normal=normal.to(**out).reshape(*lead, 3),
-            signed_distance=signed.to(**out).reshape(lead),
+            face=buffers.face[:count].to(device=points.device, dtype=torch.int64).reshape(lead),
+            point=buffers.closest[:count].to(**out).reshape(*lead, 3),
+            barycentric=buffers.barycentric[:count].to(**out).reshape(*lead, 3),
+            normal=buffers.normal[:count].to(**out).reshape(*lead, 3),
+            signed_distance=buffers.signed[:count].to(**out).reshape(lead),
+        )
+
+    def _buffers_for(self, count: int) -> "_QueryBuffers":
+        """The query kernel's arrays, at least ``count`` rows, with a launch recorded on them
+        and this body's mesh (made again when the mesh or the capacity changes)."""
+        buffers = self._buffers
+        if buffers is None or buffers.capacity < count or buffers.mesh_id != self._mesh.id:
+            capacity = max(count, 2 * buffers.capacity if buffers is not None else 0, 1)  # few regrowths
+            self._buffers = buffers = _QueryBuffers(self._mesh.id, capacity, self.device, self.sign == "winding")
+        return buffers
+
+
+class _QueryBuffers:
+    """A query kernel's inputs and outputs, ``capacity`` rows on ``device``, and its launch
+    recorded once (``wp.Launch``): a query copies its points in and runs the first rows.
+    Wrapping eight fresh tensors for Warp and packing a launch cost ~0.2 ms a query on the
+    CPU, more than the search of a few hundred points (docs/experiments/*-realtime-runtime-3.md)."""
+
+    def __init__(self, mesh_id: int, capacity: int, device: torch.device, winding: bool):
+        self.mesh_id, self.capacity = mesh_id, capacity
+        rows = dict(device=device, dtype=torch.float32)
+        self.points = torch.zeros(capacity, 3, **rows)
+        self.ranges = torch.zeros(capacity, **rows)
+        self.face = torch.zeros(capacity, dtype=torch.int32, device=device)
+        self.barycentric = torch.zeros(capacity, 3, **rows)
+        self.closest = torch.zeros(capacity, 3, **rows)
+        self.normal = torch.zeros(capacity, 3, **rows)
+        self.signed = torch.zeros(capacity, **rows)
+        self.launch = wp.launch(
+            _nearest,
+            dim=capacity,
+            inputs=[mesh_id, _vec3(self.points), wp.from_torch(self.ranges), int(winding)],
+            outputs=[wp.from_torch(self.face), _vec3(self.barycentric), _vec3(self.closest), _vec3(self.normal),
+                     wp.from_torch(self.signed)],
+            device=wp.device_from_torch(device),
+            record_cmd=True,
         )
 
 
