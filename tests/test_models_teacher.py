@@ -36,3 +36,26 @@ def test_the_autocast_teacher_answers_in_float32_close_to_the_float32_one():
     assert rounded.dtype == torch.float32 and rounded.shape == exact.shape == (300, 3)
     error = (rounded - exact).norm() / exact.norm()
     assert 0 < float(error) < 0.05  # bfloat16 rounding: a few per mille to a few per cent, never exact
+
+
+def test_the_compiled_teacher_answers_as_the_eager_one_at_every_size():
+    """``hyperbones rollouts --compile``: one compilation (shapes dynamic) answers graphs of two
+    sizes as the eager network does, to float32 rounding."""
+    from hyperbones.models.cloth_graph import ClothGraph
+    from hyperbones.models.mgn import EdgeSet
+    from hyperbones.models.teacher import Teacher, TrunkConfig
+    from hyperbones.training.rollouts import compiled_for_inference
+
+    torch.manual_seed(0)
+    teacher = Teacher(TrunkConfig(latent=16, blocks=2)).eval()
+    with torch.no_grad():
+        teacher.decoder[-1].weight.mul_(100.0)  # away from the near-zero start
+    compiled = compiled_for_inference(teacher)
+    for nodes, edges, garment in ((400, 2400, 300), (650, 3100, 500)):
+        graph = ClothGraph(torch.randn(nodes, 21), {
+            name: EdgeSet(torch.randint(0, nodes, (edges,)), torch.randint(0, nodes, (edges,)), torch.randn(edges, 8))
+            for name in ("mesh", "world")}, num_garment=garment)
+        with torch.no_grad():
+            exact, fast = teacher(graph), compiled(graph)
+        assert fast.shape == exact.shape == (garment, 3)
+        torch.testing.assert_close(fast, exact, atol=1e-5, rtol=1e-4)

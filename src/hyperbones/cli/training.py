@@ -104,7 +104,7 @@ def run_rollouts(args) -> int:
         config = replace(config, data=replace(config.data, templates=templates))
     if args.drape:
         config = replace(config, data=replace(config.data, drape=True))
-    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet)
+    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet, compile_teacher=args.compile)
     return 0
 
 
@@ -124,6 +124,9 @@ def add_rollouts(sub) -> None:
     rollouts.add_argument("--drape", action="store_true",
                           help="start every rollout from its garment draped on the body (data.drape), as simulate "
                                "does; a bank may mix draped and carried starts, and training rebuilds each as it was")
+    rollouts.add_argument("--compile", action="store_true",
+                          help="compile the teacher's network (torch.compile): ~1.2-1.35x faster rollouts on the CPU "
+                               "after 10-30 s of compiling, for a long bank; needs a C++ compiler (gcc or clang)")
     options.add_quiet(rollouts)
     rollouts.set_defaults(func=run_rollouts)
 
