@@ -59,3 +59,16 @@ def test_the_compiled_teacher_answers_as_the_eager_one_at_every_size():
             exact, fast = teacher(graph), compiled(graph)
         assert fast.shape == exact.shape == (garment, 3)
         torch.testing.assert_close(fast, exact, atol=1e-5, rtol=1e-4)
+
+
+def test_compiling_without_a_compiler_is_a_clear_error(monkeypatch, tmp_path):
+    import pytest
+
+    from hyperbones.errors import ParameterError
+    from hyperbones.models.teacher import Teacher, TrunkConfig
+    from hyperbones.training.rollouts import compiled_for_inference
+
+    monkeypatch.setenv("PATH", str(tmp_path))
+    monkeypatch.delenv("CXX", raising=False)
+    with pytest.raises(ParameterError, match="needs a C\\+\\+ compiler"):
+        compiled_for_inference(Teacher(TrunkConfig(latent=16, blocks=1)))

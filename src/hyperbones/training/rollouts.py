@@ -348,4 +348,9 @@ def compiled_for_inference(teacher: Teacher) -> Teacher:
     1.2-1.35x faster after 10-30 s of compiling, agreeing to float32 rounding
     (docs/experiments/2026-11-29-strain-sweeps.md); needs a C++ compiler, so it is asked for
     (``hyperbones rollouts --compile``), never assumed."""
+    import os
+    import shutil
+
+    if not any(shutil.which(name) for name in (os.environ.get("CXX", ""), "g++", "clang++", "c++") if name):
+        raise ParameterError("--compile needs a C++ compiler on PATH (g++, clang++ or $CXX); none was found")
     return torch.compile(teacher, dynamic=True)
