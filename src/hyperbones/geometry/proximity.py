@@ -157,8 +157,8 @@ class BodyProximity:
 class _QueryBuffers:
     """A query kernel's inputs and outputs, ``capacity`` rows on ``device``, and its launch
     recorded once (``wp.Launch``): a query copies its points in and runs the first rows.
-    Wrapping eight fresh tensors for Warp and packing a launch cost ~0.2 ms a query on the
-    CPU, more than the search of a few hundred points (docs/experiments/*-realtime-runtime-3.md)."""
+    Wrapping eight fresh tensors for Warp and packing a launch cost ~0.05 ms a query on the
+    CPU, as much as searching ~50 points near the skin (docs/experiments/*-realtime-runtime-3.md)."""
 
     def __init__(self, mesh_id: int, capacity: int, device: torch.device, winding: bool):
         self.mesh_id, self.capacity = mesh_id, capacity
