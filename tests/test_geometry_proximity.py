@@ -171,3 +171,19 @@ def test_push_outside_moves_only_close_movable_points(sphere_proximity):
     after = proximity.query(pushed, max_distance=1.0).signed_distance
     assert bool((after[:2] > 1.5e-3).all())  # inside, and 0.5 mm out: both at the margin now
     assert torch.equal(pushed[2], points[2]) and torch.equal(pushed[3], points[3])  # far; not movable
+
+
+def test_each_query_answers_alone_though_the_buffers_are_shared(sphere_proximity):
+    """Queries reuse one set of Warp arrays: an answer stays as it was after later, larger and
+    smaller queries, and each equals that of a fresh search structure."""
+    big, small = shell_points(3000, 0.9, 1.1, seed=1).float(), shell_points(7, 0.95, 1.05, seed=2).float()
+    first = sphere_proximity.query(small, max_distance=0.2)
+    kept = [value.clone() for value in (first.face, first.point, first.signed_distance)]
+    sphere_proximity.query(big, max_distance=0.2)  # grows the buffers
+    again = sphere_proximity.query(small[:3], max_distance=torch.full((3,), 0.2))
+    for value, copy in zip((first.face, first.point, first.signed_distance), kept):
+        assert torch.equal(value, copy)
+    torch.testing.assert_close(again.signed_distance, first.signed_distance[:3], atol=0, rtol=0)
+    fresh = BodyProximity(sphere_proximity.faces)
+    fresh.update(sphere_proximity._points)
+    torch.testing.assert_close(fresh.query(big, max_distance=0.2).face, sphere_proximity.query(big, max_distance=0.2).face)
