@@ -60,6 +60,8 @@ class StrainLimiter:
     # (E,) each end's share of its edge's correction (the second's negative): ``spread``'s values by edge.
     share_first: torch.Tensor = field(init=False, repr=False)
     share_second: torch.Tensor = field(init=False, repr=False)
+    # The compiled sweeps' inputs as numpy arrays (ends, band, shares), made on their first use.
+    _sweep_arrays: tuple | None = field(init=False, default=None, repr=False)
 
     def __post_init__(self):
         first, second = self.edges[:, 0], self.edges[:, 1]
@@ -112,9 +114,9 @@ class StrainLimiter:
         On the CPU without gradients the sweeps run compiled (``physics.strain_sweeps``, where
         numba is installed); elsewhere (a GPU, autograd) in torch. The two agree to float32
         rounding."""
-        low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
         if _compiled_sweeps_apply(positions):
-            return self._project_compiled(positions, low, high, contact)
+            return self._project_compiled(positions, contact)
+        low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
         x = positions
         for _ in range(self.iterations):
             along = self.difference @ x
@@ -129,10 +131,15 @@ class StrainLimiter:
                 x = contact.project(x)
         return x
 
-    def _project_compiled(self, positions: torch.Tensor, low: torch.Tensor, high: torch.Tensor,
-                          contact: ContactPlanes | None) -> torch.Tensor:
+    def _project_compiled(self, positions: torch.Tensor, contact: ContactPlanes | None) -> torch.Tensor:
         """``project`` by ``physics.strain_sweeps.jacobi_sweeps`` on a copy of (V,3) float32 CPU positions."""
         from hyperbones.physics.strain_sweeps import jacobi_sweeps
+
+        if self._sweep_arrays is None:  # fixed per garment: made once, not every call
+            low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
+            self._sweep_arrays = tuple(item.to("cpu", dtype).contiguous().numpy() for item, dtype in (
+                (self.edges[:, 0], torch.int64), (self.edges[:, 1], torch.int64), (low, torch.float32),
+                (high, torch.float32), (self.share_first, torch.float32), (self.share_second, torch.float32)))
 
         if contact is None or not len(contact.vertex):
             plane_vertex, plane_point, plane_normal = _NO_PLANES
@@ -141,12 +148,9 @@ class StrainLimiter:
             plane_point = contact.point.to("cpu", torch.float32).contiguous().numpy()
             plane_normal = contact.normal.to("cpu", torch.float32).contiguous().numpy()
         x = positions.detach().numpy().copy()  # a C-ordered copy, moved in place
-        first, second, share_first, share_second = (
-            item.to("cpu", dtype).contiguous().numpy() for item, dtype in (
-                (self.edges[:, 0], torch.int64), (self.edges[:, 1], torch.int64),
-                (self.share_first, torch.float32), (self.share_second, torch.float32)))
-        jacobi_sweeps(x, first, second, low.to(torch.float32).numpy(), high.to(torch.float32).numpy(),
-                      share_first, share_second, self.iterations, plane_vertex, plane_point, plane_normal)
+        first, second, low, high, share_first, share_second = self._sweep_arrays
+        jacobi_sweeps(x, first, second, low, high, share_first, share_second, self.iterations,
+                      plane_vertex, plane_point, plane_normal)
         return torch.from_numpy(x)
 
 

@@ -243,7 +243,7 @@ class RolloutCache:
                 if rollout.source not in self.file_detachment:  # its drift was checked when it was made
                     self.file_detachment[rollout.source] = self.detachment(rollout.physics, rollout.positions,
                                                                            rollout.body_vertices)
-                if rollout.source in self.refused_files:
+                if refused(self.config, 0.0, 0.0, self.file_detachment[rollout.source]):
                     self.refused += 1
                     rollout = None
         if rollout is None:
