@@ -15,6 +15,7 @@ from hyperbones.runtime.config import RuntimeConfig, parse_overrides
 # A non-default value for every field, each one chosen so that it changes the walk below.
 CHANGED = {
     "uv_resolution": 16,
+    "conv_mlp": False,
     "bfloat16": True,
     "follow": 0.8,
     "loose_follow": 0.7,
@@ -25,6 +26,7 @@ CHANGED = {
     "contact_margin": 0.006,
     "query_distance": 0.02,
     "round_query_distance": 0.015,
+    "round_search_gap": 0.008,
     "push_rounds": 1,
     "plane_reach": 0.01,
     "contact_rounds": 1,
@@ -125,7 +127,8 @@ def test_the_shipped_model_carries_its_runtime_config():
 
     payload = hyperbones_payload()
     # the validated choices: docs/experiments/*-realtime-runtime*.md
-    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=40, bfloat16=True, projection_iterations=4)
+    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=40, bfloat16=True, projection_iterations=4,
+                                                       round_search_gap=0.01)
     for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
         with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
             runtime_config_of({**payload, "runtime_config": bad}, "model.pt")

@@ -45,17 +45,26 @@ def test_bad_settings_are_refused():
         EdgeProjection(sheet, faces, anchor=0.0)
 
 
-def test_the_dense_solver_gives_the_sparse_solvers_answer():
-    """The GPU's solver (dense inverse, all torch) and the CPU's (sparse LU) agree, with contact
-    planes: the CUDA path is this code on another device."""
+def _stretched_sheet_with_planes(seed: int, across: float, start: int, every: int, lift: float):
+    """A 14×12 sheet stretched 15 % along x, scaled by ``across`` along y and jittered by 4 mm,
+    with a plane ``lift`` above every ``every``-th vertex from ``start`` (normals +z): the
+    sheet, its faces, the moved positions, the planes' vertices and the ``ContactPlanes``."""
     from hyperbones.physics.contact_planes import ContactPlanes
 
     sheet, faces = _grid(14, 12, 0.02)
-    generator = torch.Generator().manual_seed(0)
-    moved = sheet * torch.tensor([1.15, 0.95, 1.0]) + 0.004 * torch.randn(sheet.shape, generator=generator)
-    vertex = torch.arange(0, sheet.shape[0], 3)
-    planes = ContactPlanes(vertex, moved[vertex] + torch.tensor([0.0, 0.0, 0.002]),
+    generator = torch.Generator().manual_seed(seed)
+    moved = sheet * torch.tensor([1.15, across, 1.0]) + 0.004 * torch.randn(sheet.shape, generator=generator)
+    vertex = torch.arange(start, sheet.shape[0], every)
+    planes = ContactPlanes(vertex, moved[vertex] + torch.tensor([0.0, 0.0, lift]),
                            torch.tensor([0.0, 0.0, 1.0]).expand(len(vertex), 3).contiguous())
+    return sheet, faces, moved, vertex, planes
+
+
+def test_the_dense_solver_gives_the_sparse_solvers_answer():
+    """The GPU's solver (dense inverse, all torch) and the CPU's (sparse LU) agree, with contact
+    planes: the CUDA path is this code on another device."""
+    sheet, faces, moved, vertex, planes = _stretched_sheet_with_planes(seed=0, across=0.95, start=0, every=3,
+                                                                       lift=0.002)
     sparse = EdgeProjection(sheet, faces, solver="sparse").project(moved, planes)
     dense_projection = EdgeProjection(sheet, faces, solver="dense")
     assert dense_projection.solver == "dense" and EdgeProjection(sheet, faces).solver == "sparse"  # auto on a CPU
@@ -65,6 +74,22 @@ def test_the_dense_solver_gives_the_sparse_solvers_answer():
     assert float(((dense[vertex] - planes.point) * planes.normal).sum(1).min()) > -1e-6  # planes held
     with pytest.raises(ParameterError, match="solver"):
         EdgeProjection(sheet, faces, solver="cholmod")
+
+
+@pytest.mark.parametrize("band", [(0.0, 0.0), (0.05, 0.02)])
+def test_the_compiled_local_step_gives_the_numpy_answer(band):
+    """Where numba imports, the sparse solver's local step runs as one compiled pass; its
+    answer equals numpy's to float32 rounding, with a band of lengths and contact planes."""
+    pytest.importorskip("numba")
+    sheet, faces, moved, _, planes = _stretched_sheet_with_planes(seed=1, across=0.9, start=1, every=4, lift=0.003)
+    stretch, compression = band
+    compiled = EdgeProjection(sheet, faces, stretch=stretch, compression=compression)
+    plain = EdgeProjection(sheet, faces, stretch=stretch, compression=compression, compiled=False)
+    assert compiled._right_hand_side is not None and plain._right_hand_side is None
+    for contact in (None, planes):
+        fast, slow = compiled.project(moved, contact), plain.project(moved, contact)
+        assert float((slow - moved).abs().max()) > 1e-3  # it did move them
+        assert float((fast - slow).abs().max()) < 1e-6
 
 
 def test_planes_one_per_vertex_are_applied_as_several_per_vertex_are():

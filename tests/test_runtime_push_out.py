@@ -122,3 +122,34 @@ def test_a_vertex_pushed_out_beyond_the_body_comes_back_to_its_neighbours_side(b
     assert float((behind[others] - placed[others]).norm(dim=1).max()) > 0.01
     assert float((back_in_front[others] - placed[others]).norm(dim=1).max()) < 0.003
 
+
+
+def test_a_search_gap_searches_fewer_points_and_still_pushes_every_one_out(body):
+    """``round_search_gap``: after a projection round only vertices that may be nearer than the
+    gap are searched again; the others keep their faces, yet none is left inside the body."""
+    vertices, faces = body.rest_vertices, body.faces
+    sheet, sheet_faces = _grid(16, 16, 0.015)
+    front = float(vertices[(vertices[:, 2] > 1.2) & (vertices[:, 2] < 1.3) & (vertices[:, 0].abs() < 0.05), 1].min())
+    placed = sheet + torch.tensor([-0.11, front - 0.03, 1.1])
+    # Bent round the chest: the middle columns a centimetre inside it, the sides 1-5 cm in front of it.
+    bent = placed + torch.stack([torch.zeros(len(sheet)), 0.04 - 0.4 * (sheet[:, 0] - 0.11).square() * 8,
+                                 torch.zeros(len(sheet))], 1)
+    projection = EdgeProjection(placed, sheet_faces)
+    proximity = BodyProximity(faces)
+    proximity.update(vertices)
+    before = proximity.query(bent, max_distance=0.2).signed_distance
+    assert float(before.min()) < -0.005 and float(before.max()) > 0.02  # inside and well clear, both
+    searched, out = {}, {}
+    for gap in (0.04, 0.01):  # 0.04 = round_query_distance: every vertex within reach (exact)
+        contact = BodyContact(faces, characters=1, projections=[projection],
+                              config=RuntimeConfig(round_search_gap=gap, contact_margin=0.002))
+        search, counted = contact.proximities[0], []
+        query = search.query
+        search.query = lambda points, max_distance=1.0: (counted.append(len(points)), query(points, max_distance))[1]
+        contact([bent], vertices[None])  # a first frame, then a second one from its records
+        counted.clear()
+        (out[gap],) = contact([bent], vertices[None])
+        searched[gap] = sum(counted)
+    assert searched[0.01] < searched[0.04], searched
+    for gap, garment in out.items():
+        assert float(proximity.query(garment, max_distance=0.2).signed_distance.min()) > 0.0, gap

@@ -89,6 +89,26 @@ def test_batched_characters_match_single_ones(setup):
     assert not torch.allclose(all_three[0], all_three[2], atol=1e-3)  # the copies moved apart
 
 
+def test_without_the_conv_mlp_the_runtime_is_its_bones_alone(setup):
+    """``conv_mlp=false``: the output of a model whose Conv-MLP adds nothing (its last layer
+    zeroed), and no UV stage is timed; on, the trained-looking Conv-MLP moves the garment."""
+    from hyperbones.runtime.stage_clock import StageClock
+
+    model, identities, motion = setup
+    model = _trained_looking(model)
+    silent = copy.deepcopy(model)
+    torch.nn.init.zeros_(silent.runtime.refiner.out.weight)
+    torch.nn.init.zeros_(silent.runtime.refiner.out.bias)
+    rotations, roots = motion.joint_rotations[None, :8], motion.root_translation[None, :8]
+    without = Simulator(model.runtime, identities[:1], config=RuntimeConfig(conv_mlp=False))
+    clock = StageClock()
+    without.profile(clock)
+    bones = _run(without, rotations, roots)
+    assert torch.allclose(bones, _run(Simulator(silent.runtime, identities[:1]), rotations, roots), atol=1e-6)
+    assert not torch.allclose(bones, _run(Simulator(model.runtime, identities[:1]), rotations, roots), atol=1e-4)
+    assert "Conv-MLP" not in clock.per_frame() and "Bone-Net" in clock.per_frame()
+
+
 def test_reset_forgets_the_motion(setup):
     model, identities, motion = setup
     simulator = Simulator(_trained_looking(model).runtime, identities[:1])

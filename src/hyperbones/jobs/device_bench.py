@@ -94,6 +94,11 @@ def copy_package(name: str, site: str | Path) -> Path:
     return copy
 
 
+def runtime_label(config) -> str:
+    """The table's name for the full runtime's rows under ``config`` (a ``RuntimeConfig``)."""
+    return f"runtime @ {config.uv_resolution or 'model'}²" if config.conv_mlp else "runtime (no Conv-MLP)"
+
+
 def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: int = 30,
         warmup: int = 10, on_row: Callable[[list[DeviceRow]], None] | None = None,
         row_seconds: float = ROW_SECONDS, seconds: float = JOB_SECONDS) -> list[DeviceRow]:
@@ -132,8 +137,7 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
         bodies_at = _bodies(rig, rotations, roots)
         jobs = [(f"Module A @ {r}²", replace(RuntimeConfig(**RAW), uv_resolution=r), batch, False)
                 for r in resolutions for batch in batches]
-        jobs += [(f"runtime @ {shipped.uv_resolution or 'model'}²", shipped, batch, True)
-                 for batch in runtime_batches]
+        jobs += [(runtime_label(shipped), shipped, batch, True) for batch in runtime_batches]
         for what, config, batch, contact in jobs:
             for bfloat16 in dtypes:
                 row = DeviceRow(GARMENT, identity.num_vertices, what, batch, "bf16" if bfloat16 else "fp32",

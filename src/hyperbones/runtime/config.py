@@ -30,6 +30,10 @@ class RuntimeConfig:
     """R of the UV images the Conv-MLP runs on (0: the model's training resolution). The
     Conv-MLP is fully convolutional and its output is sampled bilinearly, so a coarser image
     costs a quarter per halving with the same per-vertex detail wherever texels still cover it."""
+    conv_mlp: bool = True
+    """Add Module A's second stage (the Conv-MLP's displacement, read back from the UV image) to
+    the garment its bones skin; off: the bones' garment alone, and no UV stage runs. The
+    runtime's contact then does what the Conv-MLP did for contact (docs/experiments/*-realtime-runtime-4.md)."""
     bfloat16: bool = False
     """Run the Conv-MLP in bfloat16 (its weights and inputs; the rest stays float32): about half
     its time where the processor has bfloat16 units (GPUs, recent x86), at ~0.5 mm of
@@ -62,9 +66,17 @@ class RuntimeConfig:
     """The same after a projection round, which moves vertices by millimetres (a nearer bound lets
     the BVH skip the far cloth). Below ``follow_far`` the garment changes: cloth between the two
     is carried rigidly instead of by the skin."""
-    push_rounds: int = 4
+    round_search_gap: float = 0.04
+    """After a projection round, a vertex found outside the body and certainly farther than this
+    from it (its distance then, less how far it has moved since) is not searched again: it keeps
+    its face, skin point and distance, which only the next round's planes and the next frame's
+    follow read. Push-outs stay exact: a vertex that may be nearer than the margin is searched.
+    At ``round_query_distance`` or more, every vertex within reach is searched (the exact answer)."""
+    push_rounds: int = 64
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
-    inside the next one."""
+    inside the next one, and off that one back inside the first. Only the vertices still inside
+    are searched again, so rounds cost little (4 until 2026-11-29: ε_c 5.7x higher on validation,
+    docs/experiments/*-realtime-runtime-4.md)."""
     plane_reach: float = 0.03
     """Vertices this close to the skin keep to the outside of their face's plane while edges are
     projected, and are the ones untangling looks at."""
@@ -105,10 +117,13 @@ class RuntimeConfig:
         if not 0.0 <= self.follow_near < self.follow_far:
             raise ParameterError(f"runtime follow_near={self.follow_near!r} and follow_far={self.follow_far!r} "
                                  "must satisfy 0 <= follow_near < follow_far")
-        for name in ("contact_margin", "query_distance", "round_query_distance", "plane_reach",
+        for name in ("contact_margin", "query_distance", "round_query_distance", "round_search_gap", "plane_reach",
                      "projection_anchor"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
+        if self.round_search_gap <= self.contact_margin:
+            raise ParameterError(f"runtime round_search_gap={self.round_search_gap!r} must be more than contact_margin="
+                                 f"{self.contact_margin!r} (a vertex nearer than the margin must be searched and pushed)")
         if self.uv_resolution != 0 and not 8 <= self.uv_resolution <= MAX_UV_RESOLUTION:
             raise ParameterError(f"runtime uv_resolution={self.uv_resolution!r} must be 0 (the model's) or in "
                                  f"[8, {MAX_UV_RESOLUTION}]")
@@ -189,5 +204,6 @@ def _parse_value(key: str, raw: str, kind) -> bool | int | float:
     return number
 
 
-RAW = {"follow": 1.0, "loose_follow": 1.0, "contact": False}
-"""The settings that turn the runtime into Module A alone (the method ``hyperbones-raw``)."""
+RAW = {"follow": 1.0, "loose_follow": 1.0, "contact": False, "conv_mlp": True}
+"""The settings that turn the runtime into Module A alone (the method ``hyperbones-raw``): both
+of its stages, nothing around them."""

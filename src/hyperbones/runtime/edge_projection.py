@@ -40,13 +40,15 @@ class EdgeProjection:
                  iterations: int = RuntimeConfig.projection_iterations, anchor: float = RuntimeConfig.projection_anchor,
                  stretch: float = RuntimeConfig.projection_stretch,
                  compression: float = RuntimeConfig.projection_compression, solver: str = "auto",
-                 device: str | torch.device = "cpu"):
+                 device: str | torch.device = "cpu", compiled: bool = True):
         """iterations: local/global steps per ``project``; anchor: α; stretch, compression: the
         band of edge lengths left alone, as fractions of the rest length (0, 0: every edge is
         pulled to its rest length; the teacher's limiter uses ``physics.strain_limit``'s band).
         solver: "sparse" (scipy's LU, minimum-degree ordering, single precision: the fastest
         measured on a CPU; positions on any device are solved on the CPU), "dense" (the inverse
-        in torch on ``device``: no host round trip, for GPUs) or "auto" (dense on CUDA)."""
+        in torch on ``device``: no host round trip, for GPUs) or "auto" (dense on CUDA).
+        compiled: the sparse solver's local step as one compiled pass where numba imports
+        (``runtime.projection_local``; the same numbers to float32 rounding), else in numpy."""
         import scipy.sparse  # here, so that importing this module stays light
         import scipy.sparse.linalg
 
@@ -77,6 +79,9 @@ class EdgeProjection:
         if solver == "auto":
             solver = "dense" if self.device.type == "cuda" else "sparse"
         self.solver = solver
+        self._right_hand_side = _compiled_right_hand_side() if compiled and solver == "sparse" else None
+        self._first = np.ascontiguousarray(edges[:, 0], dtype=np.int64)
+        self._second = np.ascontiguousarray(edges[:, 1], dtype=np.int64)
         if solver == "sparse":
             self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
                                                   options={"SymmetricMode": True}).solve
@@ -104,13 +109,18 @@ class EdgeProjection:
             vertex = contact.vertex.numpy()
             planes = (vertex, (contact.point.double() - centre).float().numpy(), contact.normal.float().numpy(),
                       _one_plane_a_vertex(vertex))
-        target = self.anchor * x
+        target = self.anchor * x  # α a: the pull towards the input positions
+        # SuperLU solves column-major right-hand sides in place of copying them (~20 % of a solve).
+        rhs = np.empty(x.shape, np.float32, order="F")
         for _ in range(self.iterations):
-            along = self.difference @ x
-            length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
-            wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
-            # SuperLU solves column-major right-hand sides in place of copying them (~20 % of a solve).
-            x = self.solve(np.asfortranarray(self.gather @ wanted + target))
+            if self._right_hand_side is not None:
+                self._right_hand_side(x, self._first, self._second, self.low, self.high, target, rhs)
+            else:
+                along = self.difference @ x
+                length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
+                wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
+                rhs[:] = self.gather @ wanted + target
+            x = self.solve(rhs)
             if planes is not None:
                 x = _onto_planes(x, *planes)
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)
@@ -136,6 +146,15 @@ class EdgeProjection:
 
 
 SOLVERS = ("auto", "sparse", "dense")
+
+
+def _compiled_right_hand_side():
+    """``runtime.projection_local.right_hand_side`` where numba imports, else None (numpy then)."""
+    try:
+        from hyperbones.runtime.projection_local import right_hand_side
+    except ImportError:
+        return None
+    return right_hand_side
 
 _INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology
 

@@ -161,13 +161,17 @@ class BodyContact:
         Where that exceeds this search's range (``config.round_query_distance``) the search
         would find nothing that matters: the vertex keeps its record, which beyond the range no
         later step reads (the follow and the planes look nearer), so the output is that of
-        searching every vertex. (Skipping vertices nearer than the range, with their stale face
-        or their face re-measured, was measured and rejected: docs/experiments/*-realtime-runtime*.md.)
+        searching every vertex. A vertex found outside that is still more than
+        ``config.round_search_gap`` away keeps its record too (below the range, an
+        approximation: its face may no longer be the nearest; it cannot be within the margin).
         """
         config = self.config
         shift = (garment - queried_at).norm(dim=1)
         clear = floor - shift  # negative: maybe inside, searched however far from the surface
-        search = (clear <= config.round_query_distance).nonzero().squeeze(1)
+        reach = torch.full_like(clear, config.round_query_distance)
+        if config.round_search_gap < config.round_query_distance:  # found outside and clear by the gap: kept
+            reach = torch.where(nearest.found & (floor > 0), torch.full_like(clear, config.round_search_gap), reach)
+        search = (clear <= reach).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        found_points(nearest)[search])
         found_floor = _distance_floor(found, config.round_query_distance)

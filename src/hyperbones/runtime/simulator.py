@@ -120,7 +120,8 @@ def grouped_rows(items: list[Item]) -> list[tuple[Item, list[int]]]:
 
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
-                   positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK) -> list[torch.Tensor]:
+                   positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK,
+                   conv_mlp: bool = True) -> list[torch.Tensor]:
     """One frame of Module A for N characters (differentiable; the trainer calls it too).
 
     Args:
@@ -129,6 +130,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         rotations, positions: (N,B,3,3), (N,B,3) world bone frames at t.
         to_local: (N,4,4) world -> local frame of each character at t.
         clock: a ``StageClock`` to charge each stage's time to (none by default).
+        conv_mlp: add the Conv-MLP's displacement (stage 2; ``RuntimeConfig.conv_mlp``).
 
     Returns:
         N tensors (V_i,3): world garment positions at t.
@@ -148,7 +150,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
                                   skinning_transforms(identity.bones.rest_positions, local_rotations[index],
                                                       local_positions[index]))
             for identity, index in zip(groups, rows)]
-    if module_a.refiner is not None:
+    if module_a.refiner is not None and conv_mlp:
         with clock.stage("UV raster"):
             images = torch.cat([identity.raster.rasterize(points)
                                 for identity, points in zip(groups, stage_one)])[batch.order]
@@ -317,7 +319,8 @@ class Simulator:
             self.window = positions[:, None].expand(count, frames, *positions.shape[1:]).clone()
         else:
             self.window = torch.cat([self.window[:, 1:], positions[:, None]], dim=1)
-        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local, clock)
+        garments = module_a_frame(self.module_a, self.batch, self.window, rotations, positions, to_local, clock,
+                                  self.config.conv_mlp)
         bodies = body_vertices.to(self.device) if body_vertices is not None else None
         motion = None
         settings = self.config
