@@ -75,7 +75,8 @@ class RuntimeConfig:
     push_rounds: int = 64
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
     inside the next one, and off that one back inside the first. Only the vertices still inside
-    are searched again, so rounds cost little (4 until 2026-11-29: ε_c 5.7x higher on validation,
+    are searched again, so rounds cost little (4 until 2026-11-29; 64 with the shipped model and
+    a 1 cm ``round_search_gap`` left 6x less cloth inside the body on validation,
     docs/experiments/*-realtime-runtime-4.md)."""
     plane_reach: float = 0.03
     """Vertices this close to the skin keep to the outside of their face's plane while edges are

@@ -156,6 +156,7 @@ def _compiled_right_hand_side():
         return None
     return right_hand_side
 
+
 _INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology
 
 
