@@ -66,12 +66,12 @@ class RuntimeConfig:
     """The same after a projection round, which moves vertices by millimetres (a nearer bound lets
     the BVH skip the far cloth). Below ``follow_far`` the garment changes: cloth between the two
     is carried rigidly instead of by the skin."""
-    round_search_gap: float = 0.04
+    round_search_gap: float = 0.0
     """After a projection round, a vertex found outside the body and certainly farther than this
     from it (its distance then, less how far it has moved since) is not searched again: it keeps
     its face, skin point and distance, which only the next round's planes and the next frame's
     follow read. Push-outs stay exact: a vertex that may be nearer than the margin is searched.
-    At ``round_query_distance`` or more, every vertex within reach is searched (the exact answer)."""
+    0 (or ``round_query_distance`` and more): every vertex within reach is searched (the exact answer)."""
     push_rounds: int = 64
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
     inside the next one, and off that one back inside the first. Only the vertices still inside
@@ -118,13 +118,14 @@ class RuntimeConfig:
         if not 0.0 <= self.follow_near < self.follow_far:
             raise ParameterError(f"runtime follow_near={self.follow_near!r} and follow_far={self.follow_far!r} "
                                  "must satisfy 0 <= follow_near < follow_far")
-        for name in ("contact_margin", "query_distance", "round_query_distance", "round_search_gap", "plane_reach",
+        for name in ("contact_margin", "query_distance", "round_query_distance", "plane_reach",
                      "projection_anchor"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
-        if self.round_search_gap <= self.contact_margin:
-            raise ParameterError(f"runtime round_search_gap={self.round_search_gap!r} must be more than contact_margin="
-                                 f"{self.contact_margin!r} (a vertex nearer than the margin must be searched and pushed)")
+        if self.round_search_gap != 0 and self.round_search_gap <= self.contact_margin:
+            raise ParameterError(f"runtime round_search_gap={self.round_search_gap!r} must be 0 (off) or more than "
+                                 f"contact_margin={self.contact_margin!r} (a vertex nearer than the margin must be "
+                                 "searched and pushed)")
         if self.uv_resolution != 0 and not 8 <= self.uv_resolution <= MAX_UV_RESOLUTION:
             raise ParameterError(f"runtime uv_resolution={self.uv_resolution!r} must be 0 (the model's) or in "
                                  f"[8, {MAX_UV_RESOLUTION}]")

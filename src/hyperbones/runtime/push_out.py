@@ -168,9 +168,9 @@ class BodyContact:
         config = self.config
         shift = (garment - queried_at).norm(dim=1)
         clear = floor - shift  # negative: maybe inside, searched however far from the surface
-        reach = torch.full_like(clear, config.round_query_distance)
-        if config.round_search_gap < config.round_query_distance:  # found outside and clear by the gap: kept
-            reach = torch.where(nearest.found & (floor > 0), torch.full_like(clear, config.round_search_gap), reach)
+        # A vertex found outside and clear by the gap keeps its record (0: no gap, the exact search).
+        gap = min(config.round_search_gap or config.round_query_distance, config.round_query_distance)
+        reach = torch.where(nearest.found & (floor > 0), gap, config.round_query_distance)
         search = (clear <= reach).nonzero().squeeze(1)
         pushed, found = self._push_out(proximity, garment[search], config.round_query_distance,
                                        found_points(nearest)[search])
