@@ -187,3 +187,30 @@ def test_each_query_answers_alone_though_the_buffers_are_shared(sphere_proximity
     fresh = BodyProximity(sphere_proximity.faces)
     fresh.update(sphere_proximity._points)
     torch.testing.assert_close(fresh.query(big, max_distance=0.2).face, sphere_proximity.query(big, max_distance=0.2).face)
+
+
+def test_a_second_push_leaves_an_acute_crease_by_both_faces_and_stops_between_pressed_parts():
+    """push_outside_two: off the floor (normal +z) a vertex landed inside a wall leaning over it
+    (a crease under 90 degrees); the wall's plain push would put it back under the floor's
+    offset plane, the two-face push puts it on both offset planes. Between two faces that face
+    each other closer than twice the margin, it goes halfway and is reported trapped."""
+    from hyperbones.geometry.surface import Nearest, push_outside_two
+
+    margin = 2e-3
+    floor_normal = torch.tensor([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0]])
+    pushed_to = torch.tensor([[0.0, 0.0, margin], [0.0, 0.0, margin]])  # the floor is z = 0
+    wall_normal = torch.nn.functional.normalize(torch.tensor([1.0, 0.0, -0.5]), dim=0)  # leans over the floor
+    ceiling_normal = torch.tensor([0.0, 0.0, -1.0])  # 1.5 mm above the floor
+    normal = torch.stack([wall_normal, ceiling_normal])
+    # The faces' nearest points to (0, 0, margin): the wall through x = 1 mm at that height, the ceiling above.
+    point = torch.stack([torch.tensor([0.0, 0.0, margin]) + 1e-3 * torch.tensor([1.0, 0.0, 0.0]) @ wall_normal
+                         * wall_normal, torch.tensor([0.0, 0.0, 1.5e-3])])
+    nearest = Nearest(face=torch.tensor([7, 9]), point=point, barycentric=torch.full((2, 3), 1 / 3), normal=normal,
+                      signed_distance=-((pushed_to - point) * normal).sum(1).abs())
+    moved, target, trapped = push_outside_two(pushed_to, nearest, margin, floor_normal, pushed_to)
+    plain = point[0] + margin * normal[0]
+    assert float(plain[2]) < margin - 1e-4  # the wall's push alone crosses back under the floor's plane
+    assert float(moved[0, 2]) == pytest.approx(margin, abs=1e-7)  # on the floor's offset plane
+    assert float((moved[0] - point[0]) @ normal[0]) == pytest.approx(margin, abs=1e-7)  # and on the wall's
+    assert float(moved[1, 2]) == pytest.approx(0.75e-3, abs=1e-7)  # halfway between floor and ceiling
+    assert trapped.tolist() == [False, True] and torch.equal(target, moved)

@@ -153,3 +153,28 @@ def test_a_search_gap_searches_fewer_points_and_still_pushes_every_one_out(body)
     assert searched[0.01] < searched[0.0], searched
     for gap, garment in out.items():
         assert float(proximity.query(garment, max_distance=0.2).signed_distance.min()) > 0.0, gap
+
+
+def _box(low: list[float], high: list[float]) -> tuple[torch.Tensor, torch.Tensor]:
+    """An axis-aligned box: 8 corners and 12 triangles wound outward."""
+    corners = torch.tensor([[high[0] if i & 1 else low[0], high[1] if i & 2 else low[1], high[2] if i & 4 else low[2]]
+                            for i in range(8)])
+    faces = torch.tensor([[0, 2, 1], [1, 2, 3], [4, 5, 6], [5, 7, 6], [0, 1, 4], [1, 5, 4],
+                          [2, 6, 3], [3, 6, 7], [0, 4, 2], [2, 4, 6], [1, 3, 5], [3, 7, 5]])
+    return corners, faces
+
+
+def test_a_vertex_between_two_body_parts_closer_than_twice_the_margin_stops_halfway():
+    """Two boxes 1.5 mm apart (an arm skinned against the chest leaves such gaps): pushed 2 mm off
+    one, a vertex is inside the other, and off that back inside the first, for every round there
+    is. The push-out sees the faces face each other and leaves it halfway, outside both."""
+    left, left_faces = _box([-0.1, -0.1, -0.1], [0.0, 0.1, 0.1])
+    right, right_faces = _box([0.0015, -0.1, -0.1], [0.1015, 0.1, 0.1])
+    vertices, faces = torch.cat([left, right]), torch.cat([left_faces, right_faces + 8])
+    garment = torch.tensor([[0.0004, 0.0, 0.0], [0.0011, 0.02, 0.0], [-0.001, 0.0, 0.03]])  # in the gap; inside the left box
+    contact = BodyContact(faces, characters=1, config=RuntimeConfig(contact_margin=0.002, push_rounds=64))
+    (pushed,) = contact([garment], vertices[None])
+    # Halfway across the gap, 0.75 mm outside both boxes (the query's own sign is a coin toss
+    # there: the two faces are exactly as near), and moved only across it.
+    assert torch.allclose(pushed[:, 0], torch.full((3,), 0.00075), atol=1e-6)
+    assert torch.allclose(pushed[:, 1:], garment[:, 1:], atol=1e-8)

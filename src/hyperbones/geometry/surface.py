@@ -148,6 +148,39 @@ def push_outside(points: torch.Tensor, nearest: Nearest, margin: float, movable:
     return torch.where(close[:, None], moved.to(points), points)
 
 
+def push_outside_two(points: torch.Tensor, nearest: Nearest, margin: float, last_normal: torch.Tensor,
+                     last_target: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Points (N,3) that a push-out put at ``last_target`` (N,3), ``margin`` off a face with unit
+    normal ``last_normal`` (N,3), and that are inside ``nearest``'s faces now, moved out of both,
+    so that pushing off one face at a time does not bounce them between two for dozens of rounds:
+
+    - a crease (the faces at an angle): to ``margin`` outside the new face, and where that would
+      cross back behind the last face's offset plane, to the nearest point where the two offset
+      planes meet;
+    - two body parts pressed together (the faces facing each other, cosine below -0.8, as where
+      an arm skinned against the chest leaves a gap under the margin): halfway between the two
+      skin points, the farthest it can be from both; these are ``trapped``: no push can do better;
+    - faces within ~18 degrees of parallel: the plain push.
+
+    Returns the (N,3) moved points, (N,3) the targets their next push is checked against and
+    (N,) bool trapped."""
+    target = nearest.point + margin * nearest.normal
+    cosine = (last_normal * nearest.normal).sum(1)
+    trapped = cosine < -0.8
+    crosses = (last_normal * (target - last_target)).sum(1) < 0
+    corner = crosses & ~trapped & (1.0 - cosine * cosine > 0.1)
+    # On both planes: points + a n_last + b n_new with n_last.(y - last_target) = 0 and n_new.(y - target) = 0.
+    to_last = (last_normal * (last_target - points)).sum(1)
+    to_new = (nearest.normal * (target - points)).sum(1)
+    det = (1.0 - cosine * cosine).clamp_min(0.1)
+    a = (to_last - cosine * to_new) / det
+    b = (to_new - cosine * to_last) / det
+    on_both = points + a[:, None] * last_normal + b[:, None] * nearest.normal
+    between = 0.5 * (last_target - margin * last_normal + nearest.point)
+    moved = torch.where(trapped[:, None], between, torch.where(corner[:, None], on_both, target)).to(points)
+    return moved, moved, trapped
+
+
 def search_ranges(points: torch.Tensor, skin: torch.Tensor | None, max_distance: float) -> torch.Tensor | float:
     """How far a nearest-face search need look from each of (N,3) ``points``: ``max_distance``,
     or less where a point of the body's surface as it is now (N,3; NaN: none known) is nearer,

@@ -72,12 +72,13 @@ class RuntimeConfig:
     its face, skin point and distance, which only the next round's planes and the next frame's
     follow read. Push-outs stay exact: a vertex that may be nearer than the margin is searched.
     0 (or ``round_query_distance`` and more): every vertex within reach is searched (the exact answer)."""
-    push_rounds: int = 64
+    push_rounds: int = 16
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
-    inside the next one, and off that one back inside the first. Only the vertices still inside
-    are searched again, so rounds cost little (4 until 2026-11-29; 64 with the shipped model and
-    a 1 cm ``round_search_gap`` left 6x less cloth inside the body on validation,
-    docs/experiments/*-realtime-runtime-4.md)."""
+    inside the next one; the second push takes it out of both faces, or halfway between two
+    body parts pressed closer than twice the margin, where it stops. Only the vertices still
+    inside are searched again. On validation no step took more than 8; on the held-out clips
+    16 and 64 give the same garments. The cap bounds a frame's worst case (4 until 2026-11-29,
+    then 64 while a push went one face at a time: docs/experiments/*-push-out-creases.md)."""
     plane_reach: float = 0.03
     """Vertices this close to the skin keep to the outside of their face's plane while edges are
     projected, and are the ones untangling looks at."""

@@ -5,7 +5,8 @@ Module A has no state to resolve contact with (its L_interp only discourages pen
 so after each frame the vertices that end up inside the body, or closer to it than the margin,
 are moved to the margin outside their nearest body face, along its normal (the projection the
 teacher's hard contact starts from); a vertex that lands inside a neighbouring face (in a
-crease) is projected again. Then, with an ``EdgeProjection`` per character, rounds of edge
+crease) is moved out of both faces, and one caught between two body parts closer than twice
+the margin is left halfway between them (``geometry.surface.push_outside_two``). Then, with an ``EdgeProjection`` per character, rounds of edge
 projection (skin-near vertices held outside their face's plane) and push-out follow, each
 from the last round's nearest faces; before them, untangling brings back vertices the push-out
 sent out on a limb's far side from their neighbours. Every setting: ``RuntimeConfig``;
@@ -19,9 +20,12 @@ import torch
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.search import search_backend
 from hyperbones.geometry.sparse import to_csr
-from hyperbones.geometry.surface import carried_points, found_points, push_outside, search_ranges
+from hyperbones.geometry.surface import (carried_points, found_points, push_outside, push_outside_two,
+                                        search_ranges)
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.stage_clock import NO_CLOCK
+
+STUCK_STEP = 1e-5  # m: a push-out round that moves a vertex less than this has stopped helping it
 
 
 class BodyContact:
@@ -193,9 +197,10 @@ class BodyContact:
         nearest = proximity.query(garment, max_distance=search_ranges(garment, skin, query_distance))
         moved = nearest.found & (nearest.signed_distance < self.margin)
         garment = push_outside(garment, nearest, self.margin)
+        index = torch.nonzero(moved).squeeze(1)
+        last_normal, last_target = nearest.normal[index], garment[index]
         for _ in range(self.config.push_rounds - 1):
             # Pushed off one face, a vertex in a crease can land inside the next one.
-            index = torch.nonzero(moved).squeeze(1)
             if len(index) == 0:
                 break
             # Any skin point bounds a search; the one each vertex was first pushed from is close by.
@@ -204,8 +209,14 @@ class BodyContact:
             inside = again.found & (again.signed_distance < 0)
             if not bool(inside.any()):
                 break
-            garment = garment.index_copy(0, index[inside], push_outside(garment[index], again, self.margin)[inside])
-            moved = torch.zeros_like(moved).index_fill_(0, index[inside], True)
+            pushed, target, trapped = push_outside_two(garment[index], again, self.margin, last_normal, last_target)
+            # A vertex trapped between two body parts, or one its push no longer moves (outside its
+            # nearest face yet inside the body, where two parts overlap), is where no push can do
+            # better: it stops.
+            stuck = trapped | ((pushed - garment[index]).norm(dim=1) < STUCK_STEP)
+            garment = garment.index_copy(0, index[inside], pushed[inside])
+            keep = inside & ~stuck
+            index, last_normal, last_target = index[keep], again.normal[keep], target[keep]
         return garment, nearest
 
 
