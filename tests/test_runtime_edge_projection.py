@@ -77,15 +77,16 @@ def test_the_dense_solver_gives_the_sparse_solvers_answer():
 
 
 @pytest.mark.parametrize("band", [(0.0, 0.0), (0.05, 0.02)])
-def test_the_compiled_local_step_gives_the_numpy_answer(band):
-    """Where numba imports, the sparse solver's local step runs as one compiled pass; its
-    answer equals numpy's to float32 rounding, with a band of lengths and contact planes."""
+def test_the_compiled_projection_gives_the_numpy_answer(band):
+    """Where numba imports, the sparse solver's iterations run compiled (local step, both
+    triangular solves with SuperLU's factors, the planes); the answer equals numpy's and
+    SuperLU's to float32 rounding, with a band of lengths and contact planes."""
     pytest.importorskip("numba")
     sheet, faces, moved, _, planes = _stretched_sheet_with_planes(seed=1, across=0.9, start=1, every=4, lift=0.003)
     stretch, compression = band
     compiled = EdgeProjection(sheet, faces, stretch=stretch, compression=compression)
     plain = EdgeProjection(sheet, faces, stretch=stretch, compression=compression, compiled=False)
-    assert compiled._right_hand_side is not None and plain._right_hand_side is None
+    assert compiled._compiled is not None and plain._compiled is None
     for contact in (None, planes):
         fast, slow = compiled.project(moved, contact), plain.project(moved, contact)
         assert float((slow - moved).abs().max()) > 1e-3  # it did move them
@@ -111,3 +112,11 @@ def test_planes_one_per_vertex_are_applied_as_several_per_vertex_are():
                           np.concatenate([normal[::-1], normal[:1]]))
     assert (one_each != x).any(axis=1).sum() > 10  # some vertices were behind their plane
     assert np.array_equal(one_each, summed)
+    try:  # the compiled pass, where numba imports: the same numbers, several planes a vertex too
+        from hyperbones.runtime.projection_local import onto_planes
+    except ImportError:
+        return
+    for planes in ((vertex, point, normal), (shuffled, np.concatenate([point[::-1], x[vertex[:1]] - normal[:1]]),
+                                             np.concatenate([normal[::-1], normal[:1]]))):
+        compiled = onto_planes(x.copy(), *planes, np.empty((len(planes[0]), 3), np.float32))
+        assert np.abs(compiled - one_each).max() < 1e-6

@@ -47,8 +47,9 @@ class EdgeProjection:
         solver: "sparse" (scipy's LU, minimum-degree ordering, single precision: the fastest
         measured on a CPU; positions on any device are solved on the CPU), "dense" (the inverse
         in torch on ``device``: no host round trip, for GPUs) or "auto" (dense on CUDA).
-        compiled: the sparse solver's local step as one compiled pass where numba imports
-        (``runtime.projection_local``; the same numbers to float32 rounding), else in numpy."""
+        compiled: the sparse solver's iterations (local step, the LU factors' triangular
+        solves, the planes) as compiled passes where numba imports (``runtime.projection_local``;
+        the same numbers to float32 rounding), else numpy and SuperLU's solve."""
         import scipy.sparse  # here, so that importing this module stays light
         import scipy.sparse.linalg
 
@@ -79,12 +80,15 @@ class EdgeProjection:
         if solver == "auto":
             solver = "dense" if self.device.type == "cuda" else "sparse"
         self.solver = solver
-        self._right_hand_side = _compiled_right_hand_side() if compiled and solver == "sparse" else None
+        self._compiled = _compiled_steps() if compiled and solver == "sparse" else None
         self._first = np.ascontiguousarray(edges[:, 0], dtype=np.int64)
         self._second = np.ascontiguousarray(edges[:, 1], dtype=np.int64)
         if solver == "sparse":
-            self.solve = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                                                  options={"SymmetricMode": True}).solve
+            factor = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                                              options={"SymmetricMode": True})
+            self.solve = factor.solve
+            if self._compiled is not None:
+                self._factors = _triangular_factors(factor)
         else:
             self.inverse = _dense_inverse(system, edges, anchor, self.device)  # (V,V)
             self.difference_t = _sparse_csr(self.difference, self.device)  # (E,V)
@@ -110,20 +114,34 @@ class EdgeProjection:
             planes = (vertex, (contact.point.double() - centre).float().numpy(), contact.normal.float().numpy(),
                       _one_plane_a_vertex(vertex))
         target = self.anchor * x  # α a: the pull towards the input positions
+        if self._compiled is not None:
+            return (torch.from_numpy(self._project_compiled(x, target, planes)).double() + centre).to(
+                device=device, dtype=dtype)
         # SuperLU solves column-major right-hand sides in place of copying them (~20 % of a solve).
         rhs = np.empty(x.shape, np.float32, order="F")
         for _ in range(self.iterations):
-            if self._right_hand_side is not None:
-                self._right_hand_side(x, self._first, self._second, self.low, self.high, target, rhs)
-            else:
-                along = self.difference @ x
-                length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
-                wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
-                rhs[:] = self.gather @ wanted + target
+            along = self.difference @ x
+            length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
+            wanted = along * (np.clip(length, self.low, self.high) / length)[:, None]
+            rhs[:] = self.gather @ wanted + target
             x = self.solve(rhs)
             if planes is not None:
                 x = _onto_planes(x, *planes)
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)
+
+    def _project_compiled(self, x: np.ndarray, target: np.ndarray, planes) -> np.ndarray:
+        """The sparse solver's iterations as compiled passes (``runtime.projection_local``): the
+        local step and right-hand side, both triangular solves with SuperLU's factors, the
+        planes. (V,3) float32 positions about the centre and α times them -> the projected (V,3)."""
+        right_hand_side, lu_solve, onto_planes = self._compiled
+        rhs, work, x = np.empty_like(x), np.empty_like(x), x.copy()
+        push = None if planes is None else np.empty((len(planes[0]), 3), np.float32)
+        for _ in range(self.iterations):
+            right_hand_side(x, self._first, self._second, self.low, self.high, target, rhs)
+            lu_solve(rhs, *self._factors, work, x)
+            if planes is not None:
+                onto_planes(x, planes[0], planes[1], planes[2], push)
+        return x
 
     def _project_dense(self, positions: torch.Tensor, contact=None) -> torch.Tensor:
         """``project`` in torch on the solver's device (the dense solver)."""
@@ -148,13 +166,26 @@ class EdgeProjection:
 SOLVERS = ("auto", "sparse", "dense")
 
 
-def _compiled_right_hand_side():
-    """``runtime.projection_local.right_hand_side`` where numba imports, else None (numpy then)."""
+def _compiled_steps():
+    """``runtime.projection_local``'s right_hand_side, lu_solve and onto_planes where numba
+    imports, else None (numpy and SuperLU's solve then)."""
     try:
-        from hyperbones.runtime.projection_local import right_hand_side
+        from hyperbones.runtime.projection_local import lu_solve, onto_planes, right_hand_side
     except ImportError:
         return None
-    return right_hand_side
+    return right_hand_side, lu_solve, onto_planes
+
+
+def _triangular_factors(factor) -> tuple[np.ndarray, ...]:
+    """SuperLU's factorisation (``Pr A Pc = L U``) as the arrays ``projection_local.lu_solve``
+    reads: perm_r, perm_c, then L's and U's CSC column starts, rows (sorted) and float32 values."""
+    lower, upper = factor.L.tocsc(), factor.U.tocsc()
+    lower.sort_indices()
+    upper.sort_indices()
+    as_index = lambda array: np.ascontiguousarray(array, dtype=np.int32)  # noqa: E731
+    return (as_index(factor.perm_r), as_index(factor.perm_c),
+            as_index(lower.indptr), as_index(lower.indices), np.ascontiguousarray(lower.data, dtype=np.float32),
+            as_index(upper.indptr), as_index(upper.indices), np.ascontiguousarray(upper.data, dtype=np.float32))
 
 
 _INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology
