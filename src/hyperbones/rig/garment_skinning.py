@@ -21,6 +21,7 @@ SMOOTHING_LENGTH = 0.15  # metres the weights are diffused over
 FREE_DISTANCE = 0.05  # cloth this far from the skin (or more) diffuses fully
 TEAR_JUMP = 0.3  # L1 change of the weights across one edge that marks a tear line
 TEAR_BAND = 0.05  # m: cloth this close (along the garment) to a tear line diffuses fully
+TEAR_PASSES = 2  # further diffusions of what is still torn after the first
 
 
 def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float = SMOOTHING_LENGTH) -> torch.Tensor:
@@ -38,6 +39,27 @@ def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float =
     # Cloth touching two body parts at once (a skirt's front across both thighs) takes its
     # nearest-skin weights from one part or the other, and LBS would tear it along that
     # line: a band of TEAR_BAND metres around such a line diffuses fully as well.
+    steps = diffusion_steps(smoothing_length, edge_length)
+    tear = _tear_band(weights, edges, edge_length)
+    rate = torch.where(tear, torch.full_like(rate, 0.5), rate)[:, None]
+    weights = diffuse(weights, edges, rate, steps)
+    # Where cloth that diffuses meets cloth on the skin that hardly does (a long skirt's hem
+    # lying on the feet), the diffusion itself can leave a tear: only the band around what is
+    # still torn diffuses again, everything else keeps its weights, pinned cloth (a waistband,
+    # which the teacher moves by these weights) included.
+    pinned = torch.zeros(len(weights), dtype=torch.bool)
+    pinned[garment.pinned] = True
+    for _ in range(TEAR_PASSES):
+        tear = _tear_band(weights, edges, edge_length) & ~pinned
+        if not bool(tear.any()):
+            break
+        weights = diffuse(weights, edges, 0.5 * tear[:, None].to(weights.dtype), steps)
+    return weights / weights.sum(1, keepdim=True)
+
+
+def _tear_band(weights: torch.Tensor, edges: torch.Tensor, edge_length: float) -> torch.Tensor:
+    """(V,) bool: the vertices within TEAR_BAND (along the garment's (E,2) edges, of mean length
+    ``edge_length``) of an edge across which the (V,J) weights change by more than TEAR_JUMP."""
     tear = torch.zeros(len(weights), dtype=torch.bool)
     torn = (weights[edges[:, 0]] - weights[edges[:, 1]]).abs().sum(1) > TEAR_JUMP
     tear[edges[torn].reshape(-1)] = True
@@ -45,9 +67,7 @@ def garment_skin_weights(garment: Garment, body: Body, smoothing_length: float =
         reached = torch.zeros(len(weights)).index_add_(0, edges[:, 0], tear[edges[:, 1]].float())
         reached.index_add_(0, edges[:, 1], tear[edges[:, 0]].float())
         tear |= reached > 0
-    rate = torch.where(tear, torch.full_like(rate, 0.5), rate)[:, None]
-    weights = diffuse(weights, edges, rate, diffusion_steps(smoothing_length, edge_length))
-    return weights / weights.sum(1, keepdim=True)
+    return tear
 
 
 class LbsMethod:
