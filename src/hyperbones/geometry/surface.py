@@ -162,8 +162,8 @@ def push_outside_two(points: torch.Tensor, nearest: Nearest, margin: float, last
       skin points, the farthest it can be from both; these are ``trapped``: no push can do better;
     - faces within ~18 degrees of parallel: the plain push.
 
-    Returns the (N,3) moved points, (N,3) the targets their next push is checked against and
-    (N,) bool trapped."""
+    Returns the (N,3) moved points (the targets a next push is checked against) and (N,) bool
+    trapped."""
     target = nearest.point + margin * nearest.normal
     cosine = (last_normal * nearest.normal).sum(1)
     trapped = cosine < -0.8
@@ -178,7 +178,7 @@ def push_outside_two(points: torch.Tensor, nearest: Nearest, margin: float, last
     on_both = points + a[:, None] * last_normal + b[:, None] * nearest.normal
     between = 0.5 * (last_target - margin * last_normal + nearest.point)
     moved = torch.where(trapped[:, None], between, torch.where(corner[:, None], on_both, target)).to(points)
-    return moved, moved, trapped
+    return moved, trapped
 
 
 def search_ranges(points: torch.Tensor, skin: torch.Tensor | None, max_distance: float) -> torch.Tensor | float:

@@ -6,10 +6,11 @@ so after each frame the vertices that end up inside the body, or closer to it th
 are moved to the margin outside their nearest body face, along its normal (the projection the
 teacher's hard contact starts from); a vertex that lands inside a neighbouring face (in a
 crease) is moved out of both faces, and one caught between two body parts closer than twice
-the margin is left halfway between them (``geometry.surface.push_outside_two``). Then, with an ``EdgeProjection`` per character, rounds of edge
-projection (skin-near vertices held outside their face's plane) and push-out follow, each
-from the last round's nearest faces; before them, untangling brings back vertices the push-out
-sent out on a limb's far side from their neighbours. Every setting: ``RuntimeConfig``;
+the margin is left halfway between them (``geometry.surface.push_outside_two``). Then, with
+an ``EdgeProjection`` per character, rounds of edge projection (skin-near vertices held
+outside their face's plane) and push-out follow, each from the last round's nearest faces;
+before them, untangling brings back vertices the push-out sent out on a limb's far side
+from their neighbours. Every setting: ``RuntimeConfig``;
 measurements: ``docs/experiments/*runtime*.md``.
 """
 
@@ -209,14 +210,14 @@ class BodyContact:
             inside = again.found & (again.signed_distance < 0)
             if not bool(inside.any()):
                 break
-            pushed, target, trapped = push_outside_two(garment[index], again, self.margin, last_normal, last_target)
+            pushed, trapped = push_outside_two(garment[index], again, self.margin, last_normal, last_target)
             # A vertex trapped between two body parts, or one its push no longer moves (outside its
             # nearest face yet inside the body, where two parts overlap), is where no push can do
             # better: it stops.
             stuck = trapped | ((pushed - garment[index]).norm(dim=1) < STUCK_STEP)
             garment = garment.index_copy(0, index[inside], pushed[inside])
             keep = inside & ~stuck
-            index, last_normal, last_target = index[keep], again.normal[keep], target[keep]
+            index, last_normal, last_target = index[keep], again.normal[keep], pushed[keep]
         return garment, nearest
 
 
