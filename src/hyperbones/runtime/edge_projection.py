@@ -111,14 +111,14 @@ class EdgeProjection:
         if contact is not None and len(contact.vertex):  # the planes, moved with the origin
             contact = contact.to("cpu")
             vertex = contact.vertex.numpy()
-            planes = (vertex, (contact.point.double() - centre).float().numpy(), contact.normal.float().numpy(),
-                      _one_plane_a_vertex(vertex))
+            planes = (vertex, (contact.point.double() - centre).float().numpy(), contact.normal.float().numpy())
         target = self.anchor * x  # α a: the pull towards the input positions
         if self._compiled is not None:
             return (torch.from_numpy(self._project_compiled(x, target, planes)).double() + centre).to(
                 device=device, dtype=dtype)
         # SuperLU solves column-major right-hand sides in place of copying them (~20 % of a solve).
         rhs = np.empty(x.shape, np.float32, order="F")
+        one_each = planes is not None and _one_plane_a_vertex(planes[0])
         for _ in range(self.iterations):
             along = self.difference @ x
             length = np.sqrt(np.einsum("ij,ij->i", along, along)).clip(1e-12)
@@ -126,15 +126,16 @@ class EdgeProjection:
             rhs[:] = self.gather @ wanted + target
             x = self.solve(rhs)
             if planes is not None:
-                x = _onto_planes(x, *planes)
+                x = _onto_planes(x, *planes, one_each)
         return (torch.from_numpy(x).double() + centre).to(device=device, dtype=dtype)
 
     def _project_compiled(self, x: np.ndarray, target: np.ndarray, planes) -> np.ndarray:
         """The sparse solver's iterations as compiled passes (``runtime.projection_local``): the
         local step and right-hand side, both triangular solves with SuperLU's factors, the
-        planes. (V,3) float32 positions about the centre and α times them -> the projected (V,3)."""
+        planes. (V,3) float32 positions about the centre (overwritten: the answer is written into
+        them) and α times them -> the projected (V,3)."""
         right_hand_side, lu_solve, onto_planes = self._compiled
-        rhs, work, x = np.empty_like(x), np.empty_like(x), x.copy()
+        rhs, work = np.empty_like(x), np.empty_like(x)
         push = None if planes is None else np.empty((len(planes[0]), 3), np.float32)
         for _ in range(self.iterations):
             right_hand_side(x, self._first, self._second, self.low, self.high, target, rhs)
