@@ -124,16 +124,23 @@ def test_a_vertex_pushed_out_beyond_the_body_comes_back_to_its_neighbours_side(b
 
 
 
+def _sheet_bent_round_the_chest(vertices: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """A 16×16 sheet 3 cm in front of the chest of the rest body (Vb,3): its (256,3) flat rest
+    positions, (450,3) faces, and (256,3) positions bent round the chest, the middle columns
+    a centimetre inside it, the sides 1-5 cm in front of it."""
+    sheet, sheet_faces = _grid(16, 16, 0.015)
+    front = float(vertices[(vertices[:, 2] > 1.2) & (vertices[:, 2] < 1.3) & (vertices[:, 0].abs() < 0.05), 1].min())
+    placed = sheet + torch.tensor([-0.11, front - 0.03, 1.1])
+    bent = placed + torch.stack([torch.zeros(len(sheet)), 0.04 - 0.4 * (sheet[:, 0] - 0.11).square() * 8,
+                                 torch.zeros(len(sheet))], 1)
+    return placed, sheet_faces, bent
+
+
 def test_a_search_gap_searches_fewer_points_and_still_pushes_every_one_out(body):
     """``round_search_gap``: after a projection round only vertices that may be nearer than the
     gap are searched again; the others keep their faces, yet none is left inside the body."""
     vertices, faces = body.rest_vertices, body.faces
-    sheet, sheet_faces = _grid(16, 16, 0.015)
-    front = float(vertices[(vertices[:, 2] > 1.2) & (vertices[:, 2] < 1.3) & (vertices[:, 0].abs() < 0.05), 1].min())
-    placed = sheet + torch.tensor([-0.11, front - 0.03, 1.1])
-    # Bent round the chest: the middle columns a centimetre inside it, the sides 1-5 cm in front of it.
-    bent = placed + torch.stack([torch.zeros(len(sheet)), 0.04 - 0.4 * (sheet[:, 0] - 0.11).square() * 8,
-                                 torch.zeros(len(sheet))], 1)
+    placed, sheet_faces, bent = _sheet_bent_round_the_chest(vertices)
     projection = EdgeProjection(placed, sheet_faces)
     proximity = BodyProximity(faces)
     proximity.update(vertices)
@@ -144,8 +151,9 @@ def test_a_search_gap_searches_fewer_points_and_still_pushes_every_one_out(body)
         contact = BodyContact(faces, characters=1, projections=[projection],
                               config=RuntimeConfig(round_search_gap=gap, contact_margin=0.002))
         search, counted = contact.proximities[0], []
-        query = search.query
+        query, push_out = search.query, search.push_out  # points searched, one at a time or pushed in one launch
         search.query = lambda points, max_distance=1.0: (counted.append(len(points)), query(points, max_distance))[1]
+        search.push_out = lambda points, *settings: (counted.append(len(points)), push_out(points, *settings))[1]
         contact([bent], vertices[None])  # a first frame, then a second one from its records
         counted.clear()
         (out[gap],) = contact([bent], vertices[None])
@@ -178,3 +186,35 @@ def test_a_vertex_between_two_body_parts_closer_than_twice_the_margin_stops_half
     # there: the two faces are exactly as near), and moved only across it.
     assert torch.allclose(pushed[:, 0], torch.full((3,), 0.00075), atol=1e-6)
     assert torch.allclose(pushed[:, 1:], garment[:, 1:], atol=1e-8)
+
+
+def test_the_push_out_in_one_warp_launch_is_the_torch_rounds(body):
+    """``BodyProximity.push_out`` (Warp, one vertex a thread) against the rounds over all vertices
+    in torch: a sheet bent through the chest, then projected and searched again, over two
+    frames (so that the second starts from the first's skin points), and a vertex between two
+    body parts: the same garments and records."""
+    vertices, faces = body.rest_vertices, body.faces
+    placed, sheet_faces, bent = _sheet_bent_round_the_chest(vertices)
+    projection = EdgeProjection(placed, sheet_faces)
+    outputs, records = {}, {}
+    for fused in (True, False):
+        contact = BodyContact(faces, characters=1, projections=[projection], config=RuntimeConfig(contact_margin=0.002))
+        contact.fused = fused
+        contact([bent], vertices[None])
+        (outputs[fused],) = contact([bent + 0.004], vertices[None])
+        records[fused] = contact.last_nearest[0]
+    assert int(((outputs[False] - bent - 0.004).norm(dim=1) > 0.005).sum()) > 20  # the rounds had work to do
+    assert torch.allclose(outputs[True], outputs[False], atol=1e-6, rtol=0)
+    for name in ("face", "point", "normal", "signed_distance"):
+        assert torch.allclose(getattr(records[True], name).float(), getattr(records[False], name).float(),
+                              atol=1e-6, rtol=0), name
+    left, left_faces = _box([-0.1, -0.1, -0.1], [0.0, 0.1, 0.1])
+    right, right_faces = _box([0.0015, -0.1, -0.1], [0.1015, 0.1, 0.1])
+    boxes, box_faces = torch.cat([left, right]), torch.cat([left_faces, right_faces + 8])
+    garment = torch.tensor([[0.0004, 0.0, 0.0], [0.0011, 0.02, 0.0], [-0.001, 0.0, 0.03]])
+    pushed = {}
+    for fused in (True, False):
+        contact = BodyContact(box_faces, characters=1, config=RuntimeConfig(contact_margin=0.002, push_rounds=64))
+        contact.fused = fused
+        (pushed[fused],) = contact([garment], boxes[None])
+    assert torch.allclose(pushed[True], pushed[False], atol=1e-7, rtol=0)

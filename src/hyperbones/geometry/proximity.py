@@ -3,7 +3,9 @@
 The search itself (which face is nearest, inside or outside) is discrete, so it runs in Warp
 without gradients; the distances the losses differentiate are recomputed in torch from the
 face it found (``geometry.surface``: ``signed_distance``, ``face_planes``, ``surface_points``), as HOOD does
-(REFERENCE.md, "Collision").
+(REFERENCE.md, "Collision"). The runtime's push-out, searches and pushes together, also runs
+here as one launch (``BodyProximity.push_out``): one vertex a thread, no tensor operations
+between its rounds.
 """
 
 from __future__ import annotations
@@ -14,6 +16,21 @@ import warp as wp
 from hyperbones.geometry.surface import Nearest, is_closed_surface
 
 SIGN_METHODS = ("auto", "normal", "winding")
+
+
+@wp.func
+def _nearest_record(mesh: wp.uint64, p: wp.vec3, max_distance: float, use_winding: int):
+    """One point's nearest face within ``max_distance``: (found, face, barycentric, closest point,
+    face normal, signed distance); where none lies within range: (False, −1, 0, p, 0, +inf)."""
+    if use_winding != 0:
+        query = wp.mesh_query_point_sign_winding_number(mesh, p, max_distance)
+    else:
+        query = wp.mesh_query_point_sign_normal(mesh, p, max_distance)
+    if query.result:
+        c = wp.mesh_eval_position(mesh, query.face, query.u, query.v)
+        return (True, query.face, wp.vec3(query.u, query.v, 1.0 - query.u - query.v), c,
+                wp.mesh_eval_face_normal(mesh, query.face), wp.sign(query.sign) * wp.length(p - c))
+    return False, -1, wp.vec3(0.0, 0.0, 0.0), p, wp.vec3(0.0, 0.0, 0.0), wp.inf
 
 
 @wp.kernel
@@ -29,25 +46,84 @@ def _nearest(
     signed_distances: wp.array(dtype=float),
 ):
     tid = wp.tid()
+    _found, face, weights, point, normal, signed = _nearest_record(mesh, points[tid], max_distances[tid], use_winding)
+    faces[tid] = face
+    barycentric[tid] = weights
+    closest[tid] = point
+    normals[tid] = normal
+    signed_distances[tid] = signed
+
+
+@wp.func
+def _bounded(p: wp.vec3, skin: wp.vec3, max_distance: float):
+    """``surface.search_ranges`` for one point: the distance to a skin point (NaN: none),
+    padded for float32 rounding, where it is below ``max_distance``."""
+    bound = wp.length(p - skin) * (1.0 + 1.0e-5) + 1.0e-6
+    if wp.isnan(bound) or bound >= max_distance:
+        return max_distance
+    return bound
+
+
+@wp.kernel(enable_backward=False)
+def _push_out(
+    mesh: wp.uint64,
+    points: wp.array(dtype=wp.vec3),
+    skin: wp.array(dtype=wp.vec3),
+    query_distance: float,
+    again_distance: float,
+    margin: float,
+    rounds: int,
+    stuck_step: float,
+    use_winding: int,
+    pushed: wp.array(dtype=wp.vec3),
+    faces: wp.array(dtype=wp.int32),
+    barycentric: wp.array(dtype=wp.vec3),
+    closest: wp.array(dtype=wp.vec3),
+    normals: wp.array(dtype=wp.vec3),
+    signed_distances: wp.array(dtype=float),
+):
+    """``push_out.BodyContact._push_out`` for one point a thread: its nearest face (searched
+    no farther than its skin point), the push to the margin, and up to ``rounds`` − 1 more
+    pushes while it is inside a face (``surface.push_outside_two``: a crease's two planes, or
+    halfway between two parts pressed together), stopping where a push no longer moves it."""
+    tid = wp.tid()
     p = points[tid]
-    max_distance = max_distances[tid]
-    if use_winding != 0:
-        query = wp.mesh_query_point_sign_winding_number(mesh, p, max_distance)
-    else:
-        query = wp.mesh_query_point_sign_normal(mesh, p, max_distance)
-    if query.result:
-        c = wp.mesh_eval_position(mesh, query.face, query.u, query.v)
-        faces[tid] = query.face
-        barycentric[tid] = wp.vec3(query.u, query.v, 1.0 - query.u - query.v)
-        closest[tid] = c
-        normals[tid] = wp.mesh_eval_face_normal(mesh, query.face)
-        signed_distances[tid] = wp.sign(query.sign) * wp.length(p - c)
-    else:
-        faces[tid] = -1
-        barycentric[tid] = wp.vec3(0.0, 0.0, 0.0)
-        closest[tid] = p
-        normals[tid] = wp.vec3(0.0, 0.0, 0.0)
-        signed_distances[tid] = wp.inf
+    found, face, weights, point, normal, signed = _nearest_record(
+        mesh, p, _bounded(p, skin[tid], query_distance), use_winding)
+    faces[tid] = face
+    barycentric[tid] = weights
+    closest[tid] = point
+    normals[tid] = normal
+    signed_distances[tid] = signed
+    if found and signed < margin:
+        p = point + margin * normal
+        last_normal = normal
+        last_target = p
+        for _ in range(rounds - 1):
+            inside, face2, weights2, point2, normal2, signed2 = _nearest_record(
+                mesh, p, _bounded(p, point, again_distance), use_winding)
+            if not (inside and signed2 < 0.0):
+                break
+            target = point2 + margin * normal2
+            cosine = wp.dot(last_normal, normal2)
+            trapped = cosine < -0.8
+            moved = target
+            if trapped:
+                moved = 0.5 * (last_target - margin * last_normal + point2)
+            elif wp.dot(last_normal, target - last_target) < 0.0 and 1.0 - cosine * cosine > 0.1:
+                to_last = wp.dot(last_normal, last_target - p)
+                to_new = wp.dot(normal2, target - p)
+                det = wp.max(1.0 - cosine * cosine, 0.1)
+                a = (to_last - cosine * to_new) / det
+                b = (to_new - cosine * to_last) / det
+                moved = p + a * last_normal + b * normal2
+            stuck = trapped or wp.length(moved - p) < stuck_step
+            p = moved
+            if stuck:
+                break
+            last_normal = normal2
+            last_target = moved
+    pushed[tid] = p
 
 
 class BodyProximity:
@@ -132,7 +208,45 @@ class BodyProximity:
             else:
                 buffers.launch.launch()
                 wp.synchronize_device("cpu")
-        # Copies: the buffers are the next query's.
+        return self._record(buffers, count, points)
+
+    def push_out(self, points: torch.Tensor, skin: torch.Tensor | None, query_distance: float,
+                 again_distance: float, margin: float, rounds: int, stuck_step: float) -> tuple[torch.Tensor, Nearest]:
+        """(N,3) points with every one inside the body or within ``margin`` moved out to the
+        margin, and their first search's ``Nearest``: ``push_out.BodyContact._push_out`` in one
+        launch (the same pushes, one point a thread). skin: (N,3) a skin point of each (NaN:
+        none) bounding its first search, else ``query_distance``; again_distance: the range of
+        the searches after a push (bounded by the first search's skin point); rounds: pushes at
+        most; stuck_step: a push moving a point less than this is its last."""
+        if self._mesh is None:
+            raise RuntimeError("BodyProximity.push_out called before update(body_vertices)")
+        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3)
+        count = queries.shape[0]
+        buffers = self._buffers_for(count)
+        buffers.points[:count].copy_(queries)
+        if skin is None:
+            buffers.skin[:count].fill_(float("nan"))
+        else:
+            buffers.skin[:count].copy_(skin.detach().reshape(-1, 3))
+        if count:
+            launch = buffers.push_launch
+            launch.set_param_at_index(3, float(query_distance))
+            launch.set_param_at_index(4, float(again_distance))
+            launch.set_param_at_index(5, float(margin))
+            launch.set_param_at_index(6, int(rounds))
+            launch.set_param_at_index(7, float(stuck_step))
+            launch.set_dim(count)
+            if self.device.type == "cuda":
+                launch.launch(stream=wp.stream_from_torch(self.device))
+            else:
+                launch.launch()
+                wp.synchronize_device("cpu")
+        return buffers.pushed[:count].to(device=points.device, dtype=points.dtype, copy=True), \
+            self._record(buffers, count, points)
+
+    def _record(self, buffers: "_QueryBuffers", count: int, points: torch.Tensor) -> Nearest:
+        """The first ``count`` rows of the buffers' outputs as a ``Nearest`` shaped and typed like
+        ``points`` (copies: the buffers are the next query's)."""
         out = dict(device=points.device, dtype=points.dtype if points.is_floating_point() else torch.float32,
                    copy=True)
         lead = points.shape[:-1]
@@ -176,6 +290,17 @@ class _QueryBuffers:
             inputs=[mesh_id, _vec3(self.points), wp.from_torch(self.ranges), int(winding)],
             outputs=[wp.from_torch(self.face), _vec3(self.barycentric), _vec3(self.closest), _vec3(self.normal),
                      wp.from_torch(self.signed)],
+            device=wp.device_from_torch(device),
+            record_cmd=True,
+        )
+        self.skin = torch.zeros(capacity, 3, **rows)
+        self.pushed = torch.zeros(capacity, 3, **rows)
+        self.push_launch = wp.launch(  # ``push_out``'s; the settings are set per call
+            _push_out,
+            dim=capacity,
+            inputs=[mesh_id, _vec3(self.points), _vec3(self.skin), 0.0, 0.0, 0.0, 1, 0.0, int(winding)],
+            outputs=[_vec3(self.pushed), wp.from_torch(self.face), _vec3(self.barycentric), _vec3(self.closest),
+                     _vec3(self.normal), wp.from_torch(self.signed)],
             device=wp.device_from_torch(device),
             record_cmd=True,
         )

@@ -63,6 +63,7 @@ class BodyContact:
         # where none was found), made once a frame by ``skin_now`` for the follow and the search.
         self._skin_now: list = [None] * characters
         self.clock = NO_CLOCK  # ``Simulator.profile`` sets a StageClock
+        self.fused = True  # push-outs in one launch where the search has one (Warp's); False: the torch rounds
 
     def forget(self) -> None:
         """Drop what the last call found (a new motion starts)."""
@@ -194,7 +195,13 @@ class BodyContact:
         skin: (V,3) a point on the body's surface as it is now for each vertex (NaN where none
         is known), e.g. where the last query found its nearest face. The distance to it bounds
         the vertex's distance to the body, so the search looks no farther: same answer, less work.
+
+        Warp's search does all of it in one launch (``BodyProximity.push_out``, the same pushes
+        one vertex a thread); the torch search runs the rounds below over all vertices at once.
         """
+        if self.fused and hasattr(proximity, "push_out"):
+            return proximity.push_out(garment, skin, query_distance, self.config.query_distance, self.margin,
+                                      self.config.push_rounds, STUCK_STEP)
         nearest = proximity.query(garment, max_distance=search_ranges(garment, skin, query_distance))
         moved = nearest.found & (nearest.signed_distance < self.margin)
         garment = push_outside(garment, nearest, self.margin)
