@@ -71,7 +71,10 @@ class RuntimeConfig:
     from it (its distance then, less how far it has moved since) is not searched again: it keeps
     its face, skin point and distance, which only the next round's planes and the next frame's
     follow read. Push-outs stay exact: a vertex that may be nearer than the margin is searched.
-    0 (or ``round_query_distance`` and more): every vertex within reach is searched (the exact answer)."""
+    0 (or ``round_query_distance`` and more): every vertex within reach is searched (the exact answer).
+    The shipped model stores 3 mm (1 cm until 2026-11-29): on validation ε_c rises from 0.006 to
+    0.014 % (a third of the 2026-11-28 runtime's), the rest holds, and a 5k frame is ~8 % cheaper
+    (docs/experiments/*-runtime-push-out-one-launch.md)."""
     push_rounds: int = 16
     """Push-outs at most per push-out step: a vertex pushed off one face in a crease can land
     inside the next one; the second push takes it out of both faces, or halfway between two
