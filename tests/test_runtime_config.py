@@ -127,7 +127,7 @@ def test_the_shipped_model_carries_its_runtime_config():
 
     payload = hyperbones_payload()
     # the validated choices: docs/experiments/*-realtime-runtime*.md
-    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=40, bfloat16=True, projection_iterations=4,
+    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=32, bfloat16=True, projection_iterations=4,
                                                        round_search_gap=0.003)
     for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
         with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
