@@ -100,7 +100,7 @@ def _push_out(
         last_normal = normal
         last_target = p
         for _ in range(rounds - 1):
-            inside, face2, weights2, point2, normal2, signed2 = _nearest_record(
+            inside, _face, _weights, point2, normal2, signed2 = _nearest_record(
                 mesh, p, _bounded(p, point, again_distance), use_winding)
             if not (inside and signed2 < 0.0):
                 break
@@ -241,8 +241,8 @@ class BodyProximity:
             else:
                 launch.launch()
                 wp.synchronize_device("cpu")
-        return buffers.pushed[:count].to(device=points.device, dtype=points.dtype, copy=True), \
-            self._record(buffers, count, points)
+        pushed = buffers.pushed[:count].to(device=points.device, dtype=points.dtype, copy=True)
+        return pushed.reshape(points.shape), self._record(buffers, count, points)
 
     def _record(self, buffers: "_QueryBuffers", count: int, points: torch.Tensor) -> Nearest:
         """The first ``count`` rows of the buffers' outputs as a ``Nearest`` shaped and typed like
