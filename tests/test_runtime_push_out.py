@@ -172,14 +172,20 @@ def _box(low: list[float], high: list[float]) -> tuple[torch.Tensor, torch.Tenso
     return corners, faces
 
 
+def _two_boxes_and_points_between() -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Two boxes 1.5 mm apart along x (16 corners, 24 faces) and three points in the gap or
+    just inside the left box (3,3)."""
+    left, left_faces = _box([-0.1, -0.1, -0.1], [0.0, 0.1, 0.1])
+    right, right_faces = _box([0.0015, -0.1, -0.1], [0.1015, 0.1, 0.1])
+    garment = torch.tensor([[0.0004, 0.0, 0.0], [0.0011, 0.02, 0.0], [-0.001, 0.0, 0.03]])
+    return torch.cat([left, right]), torch.cat([left_faces, right_faces + 8]), garment
+
+
 def test_a_vertex_between_two_body_parts_closer_than_twice_the_margin_stops_halfway():
     """Two boxes 1.5 mm apart (an arm skinned against the chest leaves such gaps): pushed 2 mm off
     one, a vertex is inside the other, and off that back inside the first, for every round there
     is. The push-out sees the faces face each other and leaves it halfway, outside both."""
-    left, left_faces = _box([-0.1, -0.1, -0.1], [0.0, 0.1, 0.1])
-    right, right_faces = _box([0.0015, -0.1, -0.1], [0.1015, 0.1, 0.1])
-    vertices, faces = torch.cat([left, right]), torch.cat([left_faces, right_faces + 8])
-    garment = torch.tensor([[0.0004, 0.0, 0.0], [0.0011, 0.02, 0.0], [-0.001, 0.0, 0.03]])  # in the gap; inside the left box
+    vertices, faces, garment = _two_boxes_and_points_between()
     contact = BodyContact(faces, characters=1, config=RuntimeConfig(contact_margin=0.002, push_rounds=64))
     (pushed,) = contact([garment], vertices[None])
     # Halfway across the gap, 0.75 mm outside both boxes (the query's own sign is a coin toss
@@ -208,10 +214,7 @@ def test_the_push_out_in_one_warp_launch_is_the_torch_rounds(body):
     for name in ("face", "point", "normal", "signed_distance"):
         assert torch.allclose(getattr(records[True], name).float(), getattr(records[False], name).float(),
                               atol=1e-6, rtol=0), name
-    left, left_faces = _box([-0.1, -0.1, -0.1], [0.0, 0.1, 0.1])
-    right, right_faces = _box([0.0015, -0.1, -0.1], [0.1015, 0.1, 0.1])
-    boxes, box_faces = torch.cat([left, right]), torch.cat([left_faces, right_faces + 8])
-    garment = torch.tensor([[0.0004, 0.0, 0.0], [0.0011, 0.02, 0.0], [-0.001, 0.0, 0.03]])
+    boxes, box_faces, garment = _two_boxes_and_points_between()
     pushed = {}
     for fused in (True, False):
         contact = BodyContact(box_faces, characters=1, config=RuntimeConfig(contact_margin=0.002, push_rounds=64))

@@ -187,27 +187,17 @@ class BodyProximity:
         Returns tensors on ``points``' device, floats in its dtype; (...,N,3) points give
         (...,N)-shaped fields.
         """
-        if self._mesh is None:
-            raise RuntimeError("BodyProximity.query called before update(body_vertices)")
-        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3)
-        count = queries.shape[0]
+        count = points[..., 0].numel()
         if isinstance(max_distance, torch.Tensor):
             ranges = max_distance.detach().reshape(-1)
             if ranges.shape[0] != count:
                 raise ValueError(f"query got {ranges.shape[0]} ranges for {count} points")
-        buffers = self._buffers_for(count)
-        buffers.points[:count].copy_(queries)
+        buffers = self._loaded("query", points)
         if isinstance(max_distance, torch.Tensor):
             buffers.ranges[:count].copy_(ranges)
         else:
             buffers.ranges[:count].fill_(float(max_distance))
-        if count:
-            buffers.launch.set_dim(count)
-            if self.device.type == "cuda":
-                buffers.launch.launch(stream=wp.stream_from_torch(self.device))
-            else:
-                buffers.launch.launch()
-                wp.synchronize_device("cpu")
+        self._run(buffers.launch, count)
         return self._record(buffers, count, points)
 
     def push_out(self, points: torch.Tensor, skin: torch.Tensor | None, query_distance: float,
@@ -218,31 +208,40 @@ class BodyProximity:
         none) bounding its first search, else ``query_distance``; again_distance: the range of
         the searches after a push (bounded by the first search's skin point); rounds: pushes at
         most; stuck_step: a push moving a point less than this is its last."""
-        if self._mesh is None:
-            raise RuntimeError("BodyProximity.push_out called before update(body_vertices)")
-        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3)
-        count = queries.shape[0]
-        buffers = self._buffers_for(count)
-        buffers.points[:count].copy_(queries)
+        count = points[..., 0].numel()
+        buffers = self._loaded("push_out", points)
         if skin is None:
             buffers.skin[:count].fill_(float("nan"))
         else:
             buffers.skin[:count].copy_(skin.detach().reshape(-1, 3))
-        if count:
-            launch = buffers.push_launch
-            launch.set_param_at_index(3, float(query_distance))
-            launch.set_param_at_index(4, float(again_distance))
-            launch.set_param_at_index(5, float(margin))
-            launch.set_param_at_index(6, int(rounds))
-            launch.set_param_at_index(7, float(stuck_step))
-            launch.set_dim(count)
-            if self.device.type == "cuda":
-                launch.launch(stream=wp.stream_from_torch(self.device))
-            else:
-                launch.launch()
-                wp.synchronize_device("cpu")
+        settings = (float(query_distance), float(again_distance), float(margin), int(rounds), float(stuck_step))
+        if settings != buffers.push_settings:  # the same every frame: set on the recorded launch once
+            for index, value in enumerate(settings, start=3):
+                buffers.push_launch.set_param_at_index(index, value)
+            buffers.push_settings = settings
+        self._run(buffers.push_launch, count)
         pushed = buffers.pushed[:count].to(device=points.device, dtype=points.dtype, copy=True)
         return pushed.reshape(points.shape), self._record(buffers, count, points)
+
+    def _loaded(self, caller: str, points: torch.Tensor) -> "_QueryBuffers":
+        """The query buffers, at least as many rows as (...,3) ``points``, with them copied in."""
+        if self._mesh is None:
+            raise RuntimeError(f"BodyProximity.{caller} called before update(body_vertices)")
+        queries = points.detach().to(device=self.device, dtype=torch.float32).reshape(-1, 3)
+        buffers = self._buffers_for(queries.shape[0])
+        buffers.points[:queries.shape[0]].copy_(queries)
+        return buffers
+
+    def _run(self, launch, count: int) -> None:
+        """A recorded launch over its first ``count`` rows: on torch's stream on CUDA, waited for on the CPU."""
+        if not count:
+            return
+        launch.set_dim(count)
+        if self.device.type == "cuda":
+            launch.launch(stream=wp.stream_from_torch(self.device))
+        else:
+            launch.launch()
+            wp.synchronize_device("cpu")
 
     def _record(self, buffers: "_QueryBuffers", count: int, points: torch.Tensor) -> Nearest:
         """The first ``count`` rows of the buffers' outputs as a ``Nearest`` shaped and typed like
@@ -295,7 +294,8 @@ class _QueryBuffers:
         )
         self.skin = torch.zeros(capacity, 3, **rows)
         self.pushed = torch.zeros(capacity, 3, **rows)
-        self.push_launch = wp.launch(  # ``push_out``'s; the settings are set per call
+        self.push_settings: tuple | None = None  # the settings last set on push_launch
+        self.push_launch = wp.launch(  # ``push_out``'s; its settings are set when they change
             _push_out,
             dim=capacity,
             inputs=[mesh_id, _vec3(self.points), _vec3(self.skin), 0.0, 0.0, 0.0, 1, 0.0, int(winding)],
