@@ -36,7 +36,13 @@ CHANGED = {
     "projection_anchor": 0.2,
     "projection_stretch": 0.03,
     "projection_compression": 0.03,
+    "proxy_vertices": 400,
+    "proxy_sweeps": 5,
+    "proxy_relaxation": 1.0,
+    "proxy_push_reach": 0.001,
 }
+# Settings read only where a garment has a proxy: changed over a config with one.
+PROXY_SETTINGS = {"proxy_sweeps", "proxy_relaxation", "proxy_push_reach"}
 
 
 def test_every_field_has_a_changed_value_here():
@@ -81,11 +87,22 @@ def default_walk(walk):
     return _run(walk, RuntimeConfig())
 
 
+@pytest.fixture(scope="module")
+def proxy_walk(walk):
+    return _run(walk, RuntimeConfig(proxy_vertices=CHANGED["proxy_vertices"]))
+
+
 @pytest.mark.parametrize("name", sorted(set(CHANGED) - {"push_rounds"}))
-def test_each_setting_changes_the_output(walk, default_walk, name):
+def test_each_setting_changes_the_output(walk, default_walk, proxy_walk, name):
     """The runtime reads each field: changing it alone changes the garment's motion."""
-    changed = _run(walk, replace(RuntimeConfig(), **{name: CHANGED[name]}))
-    assert float((changed - default_walk).abs().max()) > 1e-5, name
+    base, reference = RuntimeConfig(), default_walk
+    if name in PROXY_SETTINGS:
+        base, reference = RuntimeConfig(proxy_vertices=CHANGED["proxy_vertices"]), proxy_walk
+    if name == "proxy_push_reach":  # the sweeps' skin planes leave the final push-out nothing here
+        base = RuntimeConfig(proxy_vertices=CHANGED["proxy_vertices"], proxy_sweeps=0)
+        reference = _run(walk, base)
+    changed = _run(walk, replace(base, **{name: CHANGED[name]}))
+    assert float((changed - reference).abs().max()) > 1e-5, name
 
 
 def test_push_rounds_change_the_output_in_creases(body):
@@ -128,7 +145,7 @@ def test_the_shipped_model_carries_its_runtime_config():
     payload = hyperbones_payload()
     # the validated choices: docs/experiments/*-realtime-runtime*.md
     assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=32, bfloat16=True, projection_iterations=4,
-                                                       round_search_gap=0.003)
+                                                       round_search_gap=0.003, proxy_vertices=1000)
     for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
         with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
             runtime_config_of({**payload, "runtime_config": bad}, "model.pt")

@@ -59,19 +59,23 @@ def prepare(out: str | Path, vertices: tuple[int, ...] = VERTICES, garment: str 
     from hyperbones.body.rig import BodyRig
     from hyperbones.body.shape import BodyShape
     from hyperbones.garment.draped import draped_garment
-    from hyperbones.models.loading import hyperbones_from_checkpoint
+    from hyperbones.models.loading import hyperbones_from_checkpoint, hyperbones_payload
     from hyperbones.motion.load import load_motion
     from hyperbones.runtime.identity import encode_identity
+    from hyperbones.runtime.simulator import runtime_config_of
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     body = body_for(BodyShape())
     model = hyperbones_from_checkpoint(None, "cpu")
+    # The GPU machine lacks pymeshlab: the shipped runtime's proxy travels in the cache.
+    proxy_vertices = runtime_config_of(hyperbones_payload(None, "cpu", whole=False)).proxy_vertices
     written = []
     for count in vertices:
         draped, rest = draped_garment(garment, body, vertices=count)
         with torch.no_grad():
             identity = encode_identity(model, draped, body, name=f"{garment}-{count}", rest_vertices=rest)
+        identity = identity.with_proxy(proxy_vertices)
         written.append(identity.save(out / f"{garment}-{count}.identity.pt"))
     written.append(BodyRig.of(body).save(out / "body.rig.pt"))
     motion = load_motion("walk", body)

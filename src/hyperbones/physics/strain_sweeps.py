@@ -43,28 +43,48 @@ def jacobi_sweeps(x, first, second, low, high, share_first, share_second, iterat
                 scale = (length - low[e]) / length
             else:
                 continue
-            to_a, to_b = share_first[e] * scale, share_second[e] * scale
-            moves[a, 0] += to_a * d0
-            moves[a, 1] += to_a * d1
-            moves[a, 2] += to_a * d2
-            moves[b, 0] += to_b * d0
-            moves[b, 1] += to_b * d1
-            moves[b, 2] += to_b * d2
-        for v in range(vertices):
-            x[v, 0] += moves[v, 0]
-            x[v, 1] += moves[v, 1]
-            x[v, 2] += moves[v, 2]
-        for c in range(planes):
-            v = plane_vertex[c]
-            gap = ((x[v, 0] - plane_point[c, 0]) * plane_normal[c, 0] + (x[v, 1] - plane_point[c, 1]) * plane_normal[c, 1]
-                   + (x[v, 2] - plane_point[c, 2]) * plane_normal[c, 2])
-            depth = -gap if gap < 0.0 else np.float32(0.0)
-            push[c, 0] = depth * plane_normal[c, 0]
-            push[c, 1] = depth * plane_normal[c, 1]
-            push[c, 2] = depth * plane_normal[c, 2]
-        for c in range(planes):
-            v = plane_vertex[c]
-            x[v, 0] += push[c, 0]
-            x[v, 1] += push[c, 1]
-            x[v, 2] += push[c, 2]
+            add_edge_move(moves, a, b, share_first[e] * scale, share_second[e] * scale, d0, d1, d2)
+        apply_moves(x, moves)
+        keep_outside_planes(x, plane_vertex, plane_point, plane_normal, push)
     return x
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def add_edge_move(moves, a, b, to_a, to_b, d0, d1, d2):
+    """Add an edge's move to both ends' sums: ``to_a`` and ``to_b`` times its vector (d0, d1, d2)."""
+    moves[a, 0] += to_a * d0
+    moves[a, 1] += to_a * d1
+    moves[a, 2] += to_a * d2
+    moves[b, 0] += to_b * d0
+    moves[b, 1] += to_b * d1
+    moves[b, 2] += to_b * d2
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def apply_moves(x, moves):
+    """Add the (V,3) summed moves to the (V,3) positions, in place."""
+    for v in range(x.shape[0]):
+        x[v, 0] += moves[v, 0]
+        x[v, 1] += moves[v, 1]
+        x[v, 2] += moves[v, 2]
+
+
+@numba.njit(cache=True, nogil=True, inline="always")
+def keep_outside_planes(x, plane_vertex, plane_point, plane_normal, push):
+    """Move each constrained vertex behind its half-space's plane onto it, in place; a vertex
+    with several planes gets the sum of their corrections, each measured before any is applied
+    (``ContactPlanes.project``); push: (C,3) float32 scratch."""
+    planes = plane_vertex.shape[0]
+    for c in range(planes):
+        v = plane_vertex[c]
+        gap = ((x[v, 0] - plane_point[c, 0]) * plane_normal[c, 0] + (x[v, 1] - plane_point[c, 1]) * plane_normal[c, 1]
+               + (x[v, 2] - plane_point[c, 2]) * plane_normal[c, 2])
+        depth = -gap if gap < 0.0 else np.float32(0.0)
+        push[c, 0] = depth * plane_normal[c, 0]
+        push[c, 1] = depth * plane_normal[c, 1]
+        push[c, 2] = depth * plane_normal[c, 2]
+    for c in range(planes):
+        v = plane_vertex[c]
+        x[v, 0] += push[c, 0]
+        x[v, 1] += push[c, 1]
+        x[v, 2] += push[c, 2]

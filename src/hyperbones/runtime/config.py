@@ -20,6 +20,7 @@ from hyperbones.physics.energies import COLLISION_EPSILON
 MAX_ROUNDS = 64  # push-out and contact rounds: more is no setting but a frame that never ends
 MAX_ITERATIONS = 1000  # projection iterations per round, for the same reason
 MAX_UV_RESOLUTION = 1024  # the paper's 512 and room above it; past this an image no longer fits a frame
+MIN_PROXY_VERTICES = 100  # below this a decimated garment loses its shape (sleeves become slabs)
 
 
 @dataclass(frozen=True)
@@ -105,6 +106,25 @@ class RuntimeConfig:
     projection_compression: float = 0.0
     """Edges up to this fraction shorter than at rest are left alone by the projection."""
 
+    proxy_vertices: int = 0
+    """Correct a coarse copy of the garment with about this many vertices instead of the garment
+    itself (0: the garment; a garment with no more vertices than this is corrected itself):
+    the contact searches and the projection then cost per proxy vertex, not per garment vertex,
+    and their correction reaches every vertex by barycentric weights (``runtime.garment_proxy``).
+    The follow runs on every vertex; after the spread, ``proxy_sweeps`` edge sweeps and a
+    push-out of the vertices near the skin finish the garment."""
+    proxy_sweeps: int = 15
+    """With a proxy: Jacobi sweeps over the whole garment after the proxy's correction is spread
+    on it, each pulling every edge towards its rest length, the skin planes of ``plane_reach``
+    kept (read from each vertex's main proxy corner): they remove the stretch Module A leaves
+    between the proxy's vertices (``runtime.rest_sweeps``). 0: none."""
+    proxy_relaxation: float = 2.0
+    """Over-relaxation of those sweeps (1: each vertex moves by the mean of its edges' moves;
+    up to 2: further, converging in fewer sweeps)."""
+    proxy_push_reach: float = 0.01
+    """With a proxy, garment vertices nearer the skin than this (as their proxy triangle's
+    distances say) are searched and pushed out of the body at the end of the frame."""
+
     def __post_init__(self) -> None:
         for item in fields(self):
             value = getattr(self, item.name)
@@ -125,7 +145,7 @@ class RuntimeConfig:
             raise ParameterError(f"runtime follow_near={self.follow_near!r} and follow_far={self.follow_far!r} "
                                  "must satisfy 0 <= follow_near < follow_far")
         for name in ("contact_margin", "query_distance", "round_query_distance", "plane_reach",
-                     "projection_anchor"):
+                     "projection_anchor", "proxy_push_reach"):
             if getattr(self, name) <= 0:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be > 0")
         if self.round_search_gap != 0 and self.round_search_gap <= self.contact_margin:
@@ -137,9 +157,15 @@ class RuntimeConfig:
                                  f"[8, {MAX_UV_RESOLUTION}]")
         if not 1 <= self.push_rounds <= MAX_ROUNDS:
             raise ParameterError(f"runtime push_rounds={self.push_rounds!r} must be in [1, {MAX_ROUNDS}]")
-        for name, most in (("contact_rounds", MAX_ROUNDS), ("projection_iterations", MAX_ITERATIONS)):
+        for name, most in (("contact_rounds", MAX_ROUNDS), ("projection_iterations", MAX_ITERATIONS),
+                           ("proxy_sweeps", MAX_ITERATIONS)):
             if not 0 <= getattr(self, name) <= most:
                 raise ParameterError(f"runtime {name}={getattr(self, name)!r} must be in [0, {most}]")
+        if self.proxy_vertices != 0 and not MIN_PROXY_VERTICES <= self.proxy_vertices:
+            raise ParameterError(f"runtime proxy_vertices={self.proxy_vertices!r} must be 0 (no proxy) or at least "
+                                 f"{MIN_PROXY_VERTICES}")
+        if not 0.0 < self.proxy_relaxation <= 2.0:
+            raise ParameterError(f"runtime proxy_relaxation={self.proxy_relaxation!r} must be in (0, 2]")
         if self.projection_stretch < 0:
             raise ParameterError(f"runtime projection_stretch={self.projection_stretch!r} must be >= 0")
         if not -1.0 <= self.untangle_cosine <= 1.0:

@@ -19,6 +19,7 @@ import torch
 
 from hyperbones.errors import InputFileError
 from hyperbones.geometry.uv_raster import UvRaster
+from hyperbones.runtime.garment_proxy import GarmentProxy
 from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.rig.virtual_bones import VirtualBones
 
@@ -58,6 +59,7 @@ class Identity:
     features_uv: (d_f,R,R) F_UV.  raster: the UV atlas maps at resolution R.
     vertex_features: (V,d_f) f_v, and uvs (U,2), face_uvs (F,3) the atlas: ``at_resolution``
     rebuilds the UV maps at another R from them.
+    proxy: the coarse copy the runtime corrects in the garment's place (``with_proxy``), or None.
     """
 
     name: str
@@ -72,6 +74,7 @@ class Identity:
     vertex_features: torch.Tensor
     uvs: torch.Tensor
     face_uvs: torch.Tensor
+    proxy: GarmentProxy | None = None
 
     @property
     def num_vertices(self) -> int:
@@ -81,7 +84,19 @@ class Identity:
         return Identity(self.name, self.rest_vertices.to(device), self.faces.to(device),
                         self.rest_joint_positions.to(device), self.bones.to(device), self.weights.to(device),
                         self.film.to(device), self.features_uv.to(device), self.raster.to(device),
-                        self.vertex_features.to(device), self.uvs.to(device), self.face_uvs.to(device))
+                        self.vertex_features.to(device), self.uvs.to(device), self.face_uvs.to(device),
+                        self.proxy.to(device) if self.proxy is not None else None)
+
+    def with_proxy(self, count: int) -> "Identity":
+        """The same identity with a proxy of about ``count`` vertices (``runtime.garment_proxy``;
+        made here unless it has one of that count already), or with none where ``count`` is 0
+        or the garment has no more vertices than that."""
+        if not count or count >= self.num_vertices:
+            return self if self.proxy is None else replace(self, proxy=None)
+        if self.proxy is not None and self.proxy.target == count:
+            return self
+        device = self.rest_vertices.device
+        return replace(self, proxy=GarmentProxy.build(self.rest_vertices, self.faces, count).to(device))
 
     def at_resolution(self, resolution: int) -> "Identity":
         """The same identity with its UV maps (and F_UV) rebuilt at ``resolution``."""
@@ -102,6 +117,8 @@ class Identity:
             "features_uv": self.features_uv, "raster": self.raster.state_dict(),
             "vertex_features": self.vertex_features, "uvs": self.uvs, "face_uvs": self.face_uvs,
         }
+        if self.proxy is not None:  # optional: a cache without one is still version 2
+            payload["proxy"] = self.proxy.state_dict()
         path = Path(path)
         with atomic_path(path) as tmp:
             torch.save(payload, tmp)
@@ -112,10 +129,16 @@ class Identity:
         """A saved identity; a damaged or inconsistent file is an ``InputFileError`` naming it."""
         payload = load_versioned(path, "identity cache", IDENTITY_VERSION)
         _check_saved(Path(path), payload)
+        proxy = None
+        if "proxy" in payload:
+            try:
+                proxy = GarmentProxy.from_state_dict(payload["proxy"], payload["rest_vertices"].shape[0])
+            except ValueError as error:
+                raise InputFileError(path, f"damaged identity cache: {error}") from None
         return cls(payload["name"], payload["rest_vertices"], payload["faces"], payload["rest_joint_positions"],
                    VirtualBones(**payload["bones"]), payload["weights"], payload["film"], payload["features_uv"],
                    UvRaster.from_state_dict(payload["raster"]), payload["vertex_features"], payload["uvs"],
-                   payload["face_uvs"]).to(device)
+                   payload["face_uvs"], proxy).to(device)
 
 
 def _check_saved(path: Path, payload: dict) -> None:

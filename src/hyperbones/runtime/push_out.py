@@ -130,6 +130,17 @@ class BodyContact:
             out.append(garment)
         return out
 
+    def push_out_rows(self, character: int, garment: torch.Tensor, rows: torch.Tensor,
+                      skin: torch.Tensor | None = None) -> torch.Tensor:
+        """(V,3) ``character``'s garment with its vertices ``rows`` (M,) pushed out of this
+        frame's body (call after this frame's ``__call__``, which moved the body); skin: (M,3)
+        a skin point of each, bounding its search (NaN: none). Nothing is recorded: the next
+        frame reads the records of the vertices the contact corrected (a proxy's)."""
+        if not len(rows):
+            return garment
+        pushed, _ = self._push_out(self.proximities[character], garment[rows], self.config.query_distance, skin)
+        return garment.index_copy(0, rows, pushed)
+
     def _untangle(self, proximity, adjacency: torch.Tensor, degree: torch.Tensor, garment: torch.Tensor, nearest,
                   queried_at: torch.Tensor):
         """Vertices near the skin whose face normal points against the sum of their neighbours'

@@ -8,7 +8,9 @@ the garment is carried from where the last frame left it (loose cloth with the c
 cloth on the skin with the skin) and goes a share of the way to Module A's output, which cuts
 the jerks Module A copies from the skeleton; given the posed bodies, it is then pushed out of
 them and its edges are pulled towards their rest lengths (``runtime.push_out``,
-``runtime.edge_projection``). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
+``runtime.edge_projection``): on a large garment this runs on its proxy, a coarse copy, and
+the correction is spread over every vertex and finished there (``runtime.garment_proxy``,
+``runtime.rest_sweeps``). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
@@ -27,17 +29,27 @@ import torch
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.geometry.surface import Nearest, found_points
 from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
+from hyperbones.physics.cloth import ClothRest
+from hyperbones.physics.contact_planes import ContactPlanes
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.edge_projection import EdgeProjection
 from hyperbones.runtime.identity import Identity
+from hyperbones.runtime.rest_sweeps import RestLengthSweeps
 from hyperbones.runtime.stage_clock import NO_CLOCK
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
+
+
+def _rows(nearest: Nearest, index: torch.Tensor) -> Nearest:
+    """The rows ``index`` (M,) of a ``Nearest``."""
+    return Nearest(nearest.face[index], nearest.point[index], nearest.barycentric[index], nearest.normal[index],
+                   nearest.signed_distance[index])
 
 
 def _cpu_has_bfloat16() -> bool:
@@ -196,6 +208,9 @@ class Simulator:
         if config.uv_resolution:
             remade = {id(identity): identity.at_resolution(config.uv_resolution) for identity in identities}
             identities = [remade[id(identity)] for identity in identities]  # a repeated one stays one object
+        if body_faces is not None and config.contact:  # a proxy only where contact corrects the garment
+            remade = {id(identity): identity.with_proxy(config.proxy_vertices) for identity in identities}
+            identities = [remade[id(identity)] for identity in identities]
         resolutions = {identity.raster.resolution for identity in identities}
         if len(resolutions) > 1:
             raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
@@ -217,6 +232,10 @@ class Simulator:
         self.last_motion: torch.Tensor | None = None  # (N,4,4): the heading frames' world motion into it
         self.contact = None
         self.clock = NO_CLOCK  # ``profile`` sets a StageClock
+        # Per character: its garment's proxy (``Identity.proxy``) or None, and with one the
+        # sweeps that finish the garment after the proxy's correction is spread on it.
+        self.proxies = [identity.proxy for identity in self.identities]
+        self.sweeps: list[RestLengthSweeps | None] = [None] * len(identities)
         if body_faces is not None and config.contact:
             from hyperbones.runtime.push_out import BodyContact
 
@@ -225,13 +244,24 @@ class Simulator:
                 made: dict[int, EdgeProjection] = {}  # one factorisation per distinct identity of a crowd
                 for source, identity in zip(identities, self.identities):
                     if id(source) not in made:
+                        rest, faces = identity.rest_vertices, identity.faces
+                        if identity.proxy is not None:  # the contact corrects the proxy's vertices
+                            rest, faces = rest[identity.proxy.vertex], identity.proxy.faces
                         made[id(source)] = EdgeProjection(
-                            identity.rest_vertices, identity.faces, config.projection_iterations,
+                            rest, faces, config.projection_iterations,
                             config.projection_anchor, config.projection_stretch, config.projection_compression,
                             device=self.device)
                 projections = [made[id(source)] for source in identities]
             self.contact = BodyContact(body_faces, len(identities), self.device, projections=projections,
                                        config=config, search=search)
+            sweeps: dict[int, RestLengthSweeps] = {}
+            for row, (source, identity) in enumerate(zip(identities, self.identities)):
+                if identity.proxy is not None and config.proxy_sweeps > 0:
+                    if id(source) not in sweeps:
+                        rest = ClothRest.from_mesh(identity.rest_vertices.detach().cpu().double(), identity.faces.cpu())
+                        sweeps[id(source)] = RestLengthSweeps(rest.edges, rest.edge_lengths, identity.num_vertices,
+                                                              config.proxy_sweeps, config.proxy_relaxation, self.device)
+                    self.sweeps[row] = sweeps[id(source)]
 
     @classmethod
     def load(cls, characters: list[tuple[Garment, Body]], checkpoint=None, device: str | torch.device = "cpu",
@@ -274,6 +304,10 @@ class Simulator:
         if skin is None:
             return carried, None
         moved, distance = skin
+        proxy = self.proxies[character]
+        if proxy is not None:  # the contact's records are the proxy's: each vertex reads its main corner's
+            main = proxy.main_corner
+            moved, distance = moved[main], distance[main]
         near, far = self.config.follow_near, self.config.follow_far
         on_skin = 1.0 - ((distance - near) / (far - near)).clamp(0.0, 1.0)  # (V,)
         return carried + on_skin[:, None] * (self.last_output[character] + moved - carried), on_skin
@@ -290,6 +324,36 @@ class Simulator:
         self.last_output = self.last_to_local = self.last_motion = None
         if self.contact is not None:
             self.contact.forget()
+
+    def _resolve_contact(self, garments: list[torch.Tensor], bodies: torch.Tensor) -> list[torch.Tensor]:
+        """N garments (V_i,3) and the (N,Vb,3) posed bodies -> the garments after contact. A
+        garment with a proxy: the contact corrects the proxy's vertices, the correction is spread
+        over the garment by the proxy's weights, edge sweeps over the whole garment remove the
+        stretch left between the proxy's vertices (its skin planes kept), and the vertices near
+        the skin are searched and pushed out."""
+        proxies = self.proxies
+        inputs = [garment if proxy is None else garment[proxy.vertex] for garment, proxy in zip(garments, proxies)]
+        corrected = self.contact(inputs, bodies)
+        out = []
+        for character, (garment, before, after, proxy) in enumerate(zip(garments, inputs, corrected, proxies)):
+            if proxy is None:
+                out.append(after)
+                continue
+            nearest, main = self.contact.last_nearest[character], proxy.main_corner
+            with self.clock.stage("proxy sweeps"):
+                garment = garment + proxy.spread(after - before)
+                if self.sweeps[character] is not None:  # each vertex held by its main corner's skin plane
+                    held = nearest.found[main] & (nearest.signed_distance[main] < self.config.plane_reach)
+                    planes = ContactPlanes.nearest(_rows(nearest, main), held, self.contact.margin)
+                    garment = self.sweeps[character].project(garment, planes)
+            with self.clock.stage("contact queries"):
+                # Where the proxy's triangle says the skin is near: an exact search and push-out.
+                distance = torch.where(nearest.found, nearest.signed_distance,
+                                       torch.full_like(nearest.signed_distance, self.config.query_distance))
+                near = (proxy.spread(distance[:, None])[:, 0] < self.config.proxy_push_reach).nonzero().squeeze(1)
+                garment = self.contact.push_out_rows(character, garment, near, found_points(nearest)[main[near]])
+            out.append(garment)
+        return out
 
     @torch.no_grad()
     def step(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor,
@@ -337,7 +401,7 @@ class Simulator:
                 garments = [start + share * (target - start)
                             for start, target, share in zip(carried, garments, shares)]
         if bodies is not None:
-            garments = self.contact(garments, bodies)
+            garments = self._resolve_contact(garments, bodies)
         if settings.follows:
             self.last_output, self.last_to_local, self.last_motion = garments, to_local, motion
         clock.frame()

@@ -15,7 +15,7 @@ from contextlib import contextmanager, nullcontext
 import torch
 
 STAGES = ("forward kinematics", "Bone-Net", "garment skinning", "UV raster", "Conv-MLP", "UV sampling", "follow",
-          "contact queries", "untangling", "projection")
+          "contact queries", "untangling", "projection", "proxy sweeps")
 """The stages in the order a frame runs them (a table lists them in this order). Posing the
 body is not one: the caller poses it (``Body.pose``, ``BodyRig.pose``) and hands it to ``step``."""
 
