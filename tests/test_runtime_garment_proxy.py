@@ -105,3 +105,15 @@ def test_the_runtime_on_a_proxy_keeps_the_garment_out_of_the_body_and_its_edges_
     assert results["proxy"][0] <= 0.002 < results["raw"][0]
     assert results["proxy"][1] < 0.8 * results["raw"][1]
     assert results["proxy"][1] < 1.2 * results["full"][1]
+
+
+def test_the_identity_command_saves_the_models_proxy(body, tmp_path, capsys):
+    """``hyperbones identity`` bakes the shipped runtime's proxy into the cache, so a machine
+    without pymeshlab (a game engine's host, the GPU machines) can step it."""
+    from hyperbones.cli import main
+
+    out = tmp_path / "tshirt.identity.pt"
+    assert main(["identity", "--garment", "tshirt", "--vertices", "1500", "--out", str(out)]) == 0
+    assert "proxy" in capsys.readouterr().out
+    proxy = Identity.load(out).proxy
+    assert proxy is not None and proxy.target == 1000 and proxy.num_vertices < 1500

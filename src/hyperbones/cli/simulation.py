@@ -254,9 +254,16 @@ def run_identity(args) -> int:
     with torch.no_grad():
         identity = encode_identity(model, garment, body, uv_resolution=args.uv_resolution,
                                    rest_vertices=rest_vertices)
+    if not args.untrained:  # the model's runtime proxy travels in the cache (no pymeshlab needed where it is used)
+        from hyperbones.models.loading import hyperbones_payload
+        from hyperbones.runtime.simulator import runtime_config_of
+
+        payload = hyperbones_payload(args.checkpoint, "cpu", whole=False)
+        identity = identity.with_proxy(runtime_config_of(payload, args.checkpoint or "the shipped model").proxy_vertices)
     out = identity.save(args.out)
+    proxy = f", proxy {identity.proxy.num_vertices} vertices" if identity.proxy is not None else ""
     print(f"wrote {out.resolve()} ({identity.num_vertices} vertices, {identity.bones.num_bones} bones, "
-          f"UV {identity.raster.resolution}²{', untrained: for timing only' if args.untrained else ''})")
+          f"UV {identity.raster.resolution}²{proxy}{', untrained: for timing only' if args.untrained else ''})")
     return 0
 
 

@@ -114,8 +114,14 @@ def _decimated(vertices: np.ndarray, faces: np.ndarray, count: int) -> tuple[tor
     """(V,3) float64, (F,3) -> the garment vertices kept (P,) and the decimated triangles (Fp,3)
     over them. Without optimal placement, edge collapse only ever keeps one of an edge's two
     ends, so every vertex left is one of the input's, found again by its exact position."""
-    import pymeshlab
     from scipy.spatial import cKDTree
+
+    try:
+        import pymeshlab
+    except ImportError:
+        raise ParameterError("making a garment proxy needs pymeshlab, which is not installed here: load identity "
+                             "caches saved with their proxy (`hyperbones identity`), or run with "
+                             "--runtime proxy_vertices=0") from None
 
     meshes = pymeshlab.MeshSet()
     meshes.add_mesh(pymeshlab.Mesh(vertices, faces.astype(np.int32)))
