@@ -19,9 +19,9 @@ import torch
 
 from hyperbones.errors import InputFileError
 from hyperbones.geometry.uv_raster import UvRaster
-from hyperbones.runtime.garment_proxy import GarmentProxy
 from hyperbones.io_utils import atomic_path, load_versioned
 from hyperbones.rig.virtual_bones import VirtualBones
+from hyperbones.runtime.garment_proxy import GarmentProxy
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
