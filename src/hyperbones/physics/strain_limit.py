@@ -53,6 +53,9 @@ class StrainLimiter:
     stretch: float = STRETCH_LIMIT
     compression: float = COMPRESSION_LIMIT
     iterations: int = LIMIT_ITERATIONS
+    # Each vertex moves by this times the mean of its edges' corrections (1: plain averaging;
+    # up to 2: over-relaxed, fewer sweeps to the same strain: the runtime's proxy sweeps).
+    relaxation: float = 1.0
     # (E,V) sparse: edge vectors x[second] - x[first] = difference @ x.
     difference: torch.Tensor = field(init=False, repr=False)
     # (V,E) sparse: each vertex's averaged, mass-weighted share of its edges' corrections.
@@ -73,8 +76,8 @@ class StrainLimiter:
         self.difference = to_csr(torch.sparse_coo_tensor(
             torch.stack([edge_index.repeat(2), torch.cat([second, first])]), torch.cat([ones, -ones]),
             (count, num_vertices), check_invariants=False))
-        self.share_first = w_first / w_sum / self.edge_counts[first]
-        self.share_second = -w_second / w_sum / self.edge_counts[second]
+        self.share_first = w_first / w_sum / self.edge_counts[first] * self.relaxation
+        self.share_second = -w_second / w_sum / self.edge_counts[second] * self.relaxation
         shares = torch.cat([self.share_first, self.share_second])
         self.spread = to_csr(torch.sparse_coo_tensor(
             torch.stack([torch.cat([first, second]), edge_index.repeat(2)]), shares,
@@ -83,16 +86,16 @@ class StrainLimiter:
     @classmethod
     def build(cls, edges: torch.Tensor, rest_lengths: torch.Tensor, masses: torch.Tensor, pinned_mask: torch.Tensor,
               stretch: float = STRETCH_LIMIT, compression: float = COMPRESSION_LIMIT,
-              iterations: int = LIMIT_ITERATIONS) -> "StrainLimiter":
+              iterations: int = LIMIT_ITERATIONS, relaxation: float = 1.0) -> "StrainLimiter":
         """edges (E,2) unique undirected, rest_lengths (E,) m, masses (V,) kg, pinned_mask (V,) bool."""
-        if not (stretch >= 0 and 0 <= compression < 1 and iterations >= 0):
-            raise ValueError(f"strain limits need stretch >= 0, 0 <= compression < 1 and iterations >= 0; "
-                             f"got {stretch}, {compression}, {iterations}")
+        if not (stretch >= 0 and 0 <= compression < 1 and iterations >= 0 and 0 < relaxation <= 2):
+            raise ValueError(f"strain limits need stretch >= 0, 0 <= compression < 1, iterations >= 0 and "
+                             f"0 < relaxation <= 2; got {stretch}, {compression}, {iterations}, {relaxation}")
         inverse_masses = torch.where(pinned_mask, torch.zeros_like(masses), 1.0 / masses.clamp_min(1e-12))
         counts = torch.zeros(len(masses), dtype=torch.float32, device=masses.device)
         counts.index_add_(0, edges.reshape(-1), torch.ones(edges.numel(), device=counts.device))
         return cls(edges, rest_lengths.float(), inverse_masses.float(), counts.clamp_min(1.0),
-                   float(stretch), float(compression), int(iterations))
+                   float(stretch), float(compression), int(iterations), float(relaxation))
 
     @classmethod
     def for_cloth(cls, rest, pinned_mask: torch.Tensor) -> "StrainLimiter":
@@ -105,7 +108,8 @@ class StrainLimiter:
         if self.edges.device == torch.device(device):
             return self
         return StrainLimiter(self.edges.to(device), self.rest_lengths.to(device), self.inverse_masses.to(device),
-                             self.edge_counts.to(device), self.stretch, self.compression, self.iterations)
+                             self.edge_counts.to(device), self.stretch, self.compression, self.iterations,
+                             self.relaxation)
 
     def project(self, positions: torch.Tensor, contact: ContactPlanes | None = None) -> torch.Tensor:
         """(V,3) -> (V,3) positions after ``iterations`` Jacobi sweeps; ``contact`` (a
@@ -133,7 +137,7 @@ class StrainLimiter:
 
     def _project_compiled(self, positions: torch.Tensor, contact: ContactPlanes | None) -> torch.Tensor:
         """``project`` by ``physics.strain_sweeps.jacobi_sweeps`` on a copy of (V,3) float32 CPU positions."""
-        from hyperbones.physics.strain_sweeps import jacobi_sweeps
+        from hyperbones.physics.strain_sweeps import jacobi_sweeps, rest_length_sweeps
 
         if self._sweep_arrays is None:  # fixed per garment: made once, not every call
             low, high = self.rest_lengths * (1.0 - self.compression), self.rest_lengths * (1.0 + self.stretch)
@@ -149,8 +153,12 @@ class StrainLimiter:
             plane_normal = contact.normal.to("cpu", torch.float32).contiguous().numpy()
         x = positions.detach().numpy().copy()  # a C-ordered copy, moved in place
         first, second, low, high, share_first, share_second = self._sweep_arrays
-        jacobi_sweeps(x, first, second, low, high, share_first, share_second, self.iterations,
-                      plane_vertex, plane_point, plane_normal)
+        if self.stretch == 0 and self.compression == 0:  # no band: every edge to its rest length
+            rest_length_sweeps(x, first, second, low, share_first, share_second, self.iterations,
+                               plane_vertex, plane_point, plane_normal)
+        else:
+            jacobi_sweeps(x, first, second, low, high, share_first, share_second, self.iterations,
+                          plane_vertex, plane_point, plane_normal)
         return torch.from_numpy(x)
 
 
@@ -167,7 +175,16 @@ def _compiled_sweeps_apply(positions: torch.Tensor) -> bool:
     return _HAS_NUMBA
 
 
-_HAS_NUMBA = importlib.util.find_spec("numba") is not None
+def _numba_installed() -> bool:
+    """Whether numba can be imported (a process that blocked it, ``sys.modules["numba"] = None``
+    as the torch-only tests do, has none)."""
+    try:
+        return importlib.util.find_spec("numba") is not None
+    except ValueError:  # blocked: sys.modules holds None, whose spec find_spec cannot read
+        return False
+
+
+_HAS_NUMBA = _numba_installed()
 
 
 __all__ = ["StrainLimiter", "STRETCH_LIMIT", "COMPRESSION_LIMIT", "LIMIT_ITERATIONS"]

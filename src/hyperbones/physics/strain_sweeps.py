@@ -49,6 +49,28 @@ def jacobi_sweeps(x, first, second, low, high, share_first, share_second, iterat
     return x
 
 
+@numba.njit(cache=True, nogil=True, fastmath=True, error_model="numpy")
+def rest_length_sweeps(x, first, second, rest, share_first, share_second, sweeps, plane_vertex, plane_point,
+                       plane_normal):
+    """``jacobi_sweeps`` without a band: every edge moves towards its (E,) ``rest`` length, so
+    no branch per edge, and in fast-math (~0.08 ms a sweep at 5k vertices against ~0.23 for
+    ``jacobi_sweeps``): the runtime's proxy sweeps. Same arguments otherwise."""
+    edges, vertices = first.shape[0], x.shape[0]
+    moves = np.zeros((vertices, 3), np.float32)
+    push = np.empty((plane_vertex.shape[0], 3), np.float32)
+    for _ in range(sweeps):
+        moves[:] = 0.0
+        for e in range(edges):
+            a, b = first[e], second[e]
+            d0, d1, d2 = x[b, 0] - x[a, 0], x[b, 1] - x[a, 1], x[b, 2] - x[a, 2]
+            length = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            scale = (length - rest[e]) / max(length, np.float32(1e-12))
+            add_edge_move(moves, a, b, share_first[e] * scale, share_second[e] * scale, d0, d1, d2)
+        apply_moves(x, moves)
+        keep_outside_planes(x, plane_vertex, plane_point, plane_normal, push)
+    return x
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def add_edge_move(moves, a, b, to_a, to_b, d0, d1, d2):
     """Add an edge's move to both ends' sums: ``to_a`` and ``to_b`` times its vector (d0, d1, d2)."""

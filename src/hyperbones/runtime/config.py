@@ -120,7 +120,7 @@ class RuntimeConfig:
     """With a proxy: Jacobi sweeps over the whole garment after the proxy's correction is spread
     on it, each pulling every edge towards its rest length, the skin planes of ``plane_reach``
     kept (read from each vertex's main proxy corner): they remove the stretch Module A leaves
-    between the proxy's vertices (``runtime.rest_sweeps``). 0: none."""
+    between the proxy's vertices (``physics.strain_limit`` with no band). 0: none."""
     proxy_relaxation: float = 2.0
     """Over-relaxation of those sweeps (1: each vertex moves by the mean of its edges' moves;
     up to 2: further, converging in fewer sweeps; 15 at 2 equal 30 at 1 on validation)."""

@@ -10,7 +10,7 @@ the jerks Module A copies from the skeleton; given the posed bodies, it is then 
 them and its edges are pulled towards their rest lengths (``runtime.push_out``,
 ``runtime.edge_projection``): on a large garment this runs on its proxy, a coarse copy, and
 the correction is spread over every vertex and finished there (``runtime.garment_proxy``,
-``runtime.rest_sweeps``). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
+``physics.strain_limit`` without its band). Measurements behind the defaults: ``docs/experiments/*runtime*.md``.
 
     sim = Simulator.load([(garment, body)], checkpoint)   # or Simulator(module_a, [identity, ...])
     for rotations, root, body_vertices in motion_frames:  # (31,3,3), (3,), (Vb,3) per character
@@ -29,27 +29,21 @@ import torch
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.surface import Nearest, found_points
+from hyperbones.geometry.surface import found_points
 from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.contact_planes import ContactPlanes
+from hyperbones.physics.strain_limit import StrainLimiter
 from hyperbones.rig.virtual_bones import pose_bones
 from hyperbones.runtime.config import RuntimeConfig
 from hyperbones.runtime.edge_projection import EdgeProjection
 from hyperbones.runtime.identity import Identity
-from hyperbones.runtime.rest_sweeps import RestLengthSweeps
 from hyperbones.runtime.stage_clock import NO_CLOCK
 
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
-
-
-def _rows(nearest: Nearest, index: torch.Tensor) -> Nearest:
-    """The rows ``index`` (M,) of a ``Nearest``."""
-    return Nearest(nearest.face[index], nearest.point[index], nearest.barycentric[index], nearest.normal[index],
-                   nearest.signed_distance[index])
 
 
 def _cpu_has_bfloat16() -> bool:
@@ -235,7 +229,7 @@ class Simulator:
         # Per character: its garment's proxy (``Identity.proxy``) or None, and with one the
         # sweeps that finish the garment after the proxy's correction is spread on it.
         self.proxies = [identity.proxy for identity in self.identities]
-        self.sweeps: list[RestLengthSweeps | None] = [None] * len(identities)
+        self.sweeps: list[StrainLimiter | None] = [None] * len(identities)
         if body_faces is not None and config.contact:
             from hyperbones.runtime.push_out import BodyContact
 
@@ -254,13 +248,16 @@ class Simulator:
                 projections = [made[id(source)] for source in identities]
             self.contact = BodyContact(body_faces, len(identities), self.device, projections=projections,
                                        config=config, search=search)
-            sweeps: dict[int, RestLengthSweeps] = {}
+            sweeps: dict[int, StrainLimiter] = {}
             for row, (source, identity) in enumerate(zip(identities, self.identities)):
                 if identity.proxy is not None and config.proxy_sweeps > 0:
-                    if id(source) not in sweeps:
+                    if id(source) not in sweeps:  # the strain limiter with no band, equal masses
                         rest = ClothRest.from_mesh(identity.rest_vertices.detach().cpu().double(), identity.faces.cpu())
-                        sweeps[id(source)] = RestLengthSweeps(rest.edges, rest.edge_lengths, identity.num_vertices,
-                                                              config.proxy_sweeps, config.proxy_relaxation, self.device)
+                        count = identity.num_vertices
+                        sweeps[id(source)] = StrainLimiter.build(
+                            rest.edges, rest.edge_lengths, torch.ones(count), torch.zeros(count, dtype=torch.bool),
+                            stretch=0.0, compression=0.0, iterations=config.proxy_sweeps,
+                            relaxation=config.proxy_relaxation).to(self.device)
                     self.sweeps[row] = sweeps[id(source)]
 
     @classmethod
@@ -343,8 +340,10 @@ class Simulator:
             with self.clock.stage("proxy sweeps"):
                 garment = garment + proxy.spread(after - before)
                 if self.sweeps[character] is not None:  # each vertex held by its main corner's skin plane
-                    held = nearest.found[main] & (nearest.signed_distance[main] < self.config.plane_reach)
-                    planes = ContactPlanes.nearest(_rows(nearest, main), held, self.contact.margin)
+                    held = (nearest.found[main] & (nearest.signed_distance[main] < self.config.plane_reach)).nonzero()
+                    vertex = held.squeeze(1)
+                    normal = nearest.normal[main[vertex]]
+                    planes = ContactPlanes(vertex, nearest.point[main[vertex]] + self.contact.margin * normal, normal)
                     garment = self.sweeps[character].project(garment, planes)
             with self.clock.stage("contact queries"):
                 # Where the proxy's triangle says the skin is near: an exact search and push-out.
