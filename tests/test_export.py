@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from hyperbones.errors import InputFileError, OutputError, ParameterError
-from hyperbones.export import (UsdMesh, read_frames_npz, read_pc2, write_frames_npz,
+from hyperbones.export import (SceneMesh, read_frames_npz, read_pc2, write_frames_npz,
                                write_obj_sequence, write_pc2, write_usd)
 from hyperbones.export import frames as frames_module
 from hyperbones.export import obj_sequence as obj_module
@@ -202,9 +202,9 @@ def test_usd_stage(tmp_path, suffix):
     body_vertices, body_faces, _, _ = tube(n_around=8, n_rows=3, n_frames=5)
     static_vertices = vertices[0] + 1.0
     meshes = [
-        UsdMesh("garment", vertices, faces, uvs=uvs, face_uvs=face_uvs, display_color=(0.8, 0.1, 0.1)),
-        UsdMesh("body", body_vertices, body_faces),
-        UsdMesh("floor", static_vertices, faces),
+        SceneMesh("garment", vertices, faces, uvs=uvs, face_uvs=face_uvs, display_color=(0.8, 0.1, 0.1)),
+        SceneMesh("body", body_vertices, body_faces),
+        SceneMesh("floor", static_vertices, faces),
     ]
     path = write_usd(tmp_path / f"scene{suffix}", meshes, fps=24.0)
     assert leftovers(tmp_path) == [path.name]
@@ -248,7 +248,7 @@ def test_usd_y_up_and_units(tmp_path):
     from pxr import Usd, UsdGeom
 
     vertices = np.array([[[1.0, 2.0, 3.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])
-    path = write_usd(tmp_path / "y.usda", [UsdMesh("m", vertices, [[0, 1, 2]])],
+    path = write_usd(tmp_path / "y.usda", [SceneMesh("m", vertices, [[0, 1, 2]])],
                      up_axis="Y", meters_per_unit=0.01)
     stage = Usd.Stage.Open(str(path))
     assert UsdGeom.GetStageUpAxis(stage) == "Y"
@@ -260,13 +260,13 @@ def test_usd_y_up_and_units(tmp_path):
 def test_usd_rejects_bad_input(tmp_path):
     vertices, faces, _, _ = tube(n_frames=3)
     with pytest.raises(ParameterError, match="frame counts"):
-        write_usd(tmp_path / "a.usda", [UsdMesh("a", vertices, faces), UsdMesh("b", vertices[:2], faces)])
+        write_usd(tmp_path / "a.usda", [SceneMesh("a", vertices, faces), SceneMesh("b", vertices[:2], faces)])
     with pytest.raises(ParameterError, match="identifier"):
-        write_usd(tmp_path / "a.usda", [UsdMesh("my mesh", vertices, faces)])
+        write_usd(tmp_path / "a.usda", [SceneMesh("my mesh", vertices, faces)])
     with pytest.raises(ParameterError, match="named"):
-        write_usd(tmp_path / "a.usda", [UsdMesh("a", vertices, faces), UsdMesh("a", vertices, faces)])
+        write_usd(tmp_path / "a.usda", [SceneMesh("a", vertices, faces), SceneMesh("a", vertices, faces)])
     with pytest.raises(ParameterError):
-        write_usd(tmp_path / "a.obj", [UsdMesh("a", vertices, faces)])
+        write_usd(tmp_path / "a.obj", [SceneMesh("a", vertices, faces)])
     assert leftovers(tmp_path) == []
 
 
@@ -407,7 +407,7 @@ def test_usd_failure_leaves_nothing(tmp_path, monkeypatch):
             raise DiskFull(28, "No space left on device")
 
     monkeypatch.setattr(usd_module, "_define_mesh", failing_define)
-    meshes = [UsdMesh("a", vertices, faces), UsdMesh("b", vertices, faces)]
+    meshes = [SceneMesh("a", vertices, faces), SceneMesh("b", vertices, faces)]
     for suffix in (".usda", ".usdc"):
         with pytest.raises(OutputError, match="No space left on device"):
             write_usd(tmp_path / f"scene{suffix}", meshes)

@@ -57,7 +57,8 @@ def run_simulate(args) -> int:
                             blend_in=args.blend_in, hold=args.hold, checkpoint=args.checkpoint, device=args.device,
                             source_fps=args.source_fps, progress=not args.quiet, runtime=args.runtime,
                             uv_resolution=args.uv_resolution)
-    paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet)
+    paths = export_simulation(result, args.out, preview=not args.no_preview, obj=args.obj, progress=not args.quiet,
+                              gltf=args.gltf)
     _print_run(result, paths)
     return 0
 
@@ -90,6 +91,10 @@ def add_simulate(sub) -> None:
     options.add_uv_resolution(simulate)
     options.add_runtime(simulate)
     simulate.add_argument("--obj", action="store_true", help="also write an OBJ per frame into DIR/obj/")
+    simulate.add_argument("--gltf", action="store_true",
+                          help="also write DIR/scene.glb: body and garment as binary glTF 2.0 (Y up, metres), one "
+                               "morph target a frame and one weight animation, as three.js, Blender and Babylon.js "
+                               "import vertex animation")
     simulate.add_argument("--no-preview", action="store_true", help="skip the preview video")
     options.add_quiet(simulate)
     simulate.set_defaults(func=run_simulate)

@@ -2,56 +2,21 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from hyperbones.errors import OutputError, ParameterError
-from hyperbones.export._checks import (check_positive, check_up, faces_array, frames_array, to_up,
-                                       uv_arrays)
+from hyperbones.export._checks import check_positive, check_up
+from hyperbones.export.scene_mesh import CheckedMesh, SceneMesh, checked_meshes
 from hyperbones.io_utils import atomic_path, stated_reason
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
 
-@dataclass
-class UsdMesh:
-    """One mesh for :func:`write_usd`.
-
-    Attributes:
-        name: prim name under ``/Root`` (a USD identifier: letters, digits, ``_``; not
-            starting with a digit).
-        vertices: (T,V,3) animated or (V,3) static positions, metres, Z up.
-        faces: (F,3) 0-based triangle vertex indices.
-        uvs: optional (U,2) texture coordinates.
-        face_uvs: optional (F,3) indices into ``uvs`` per face corner (seams); written with
-            ``uvs`` as an indexed faceVarying ``primvars:st``. When omitted with ``uvs`` of
-            shape (V,2), the faces index both.
-        display_color: optional RGB in [0, 1], (3,) for the whole mesh or (V,3) per vertex,
-            written as ``primvars:displayColor``.
-    """
-
-    name: str
-    vertices: np.ndarray
-    faces: np.ndarray
-    uvs: np.ndarray | None = None
-    face_uvs: np.ndarray | None = None
-    display_color: tuple[float, float, float] | np.ndarray | None = None
-
-
-@dataclass
-class _Checked:
-    name: str
-    points: np.ndarray  # (T,V,3) or (V,3) float32, already in the stage's axes and units
-    faces: np.ndarray
-    uv: tuple[np.ndarray, np.ndarray] | None
-    color: np.ndarray | None
-
-
 def write_usd(
     path: str | Path,
-    meshes: list[UsdMesh],
+    meshes: list[SceneMesh],
     fps: float = 30.0,
     up_axis: str = "Z",
     meters_per_unit: float = 1.0,
@@ -108,53 +73,17 @@ def write_usd(
     return path
 
 
-def _check_meshes(meshes, up_axis: str, meters_per_unit: float, Sdf) -> list[_Checked]:
-    if isinstance(meshes, UsdMesh):
-        meshes = [meshes]
-    meshes = list(meshes)
-    if not meshes:
-        raise ParameterError("write_usd needs at least one mesh")
-    names: set[str] = set()
-    frame_counts: set[int] = set()
-    checked = []
-    for mesh in meshes:
-        if not isinstance(mesh, UsdMesh):
-            raise ParameterError(f"meshes must be UsdMesh instances, got {type(mesh).__name__}")
-        if not isinstance(mesh.name, str) or not Sdf.Path.IsValidIdentifier(mesh.name):
+def _check_meshes(meshes, up_axis: str, meters_per_unit: float, Sdf) -> list[CheckedMesh]:
+    """``checked_meshes``, and each name a USD identifier."""
+    for mesh in [meshes] if isinstance(meshes, SceneMesh) else list(meshes):
+        name = getattr(mesh, "name", None)
+        if isinstance(name, str) and not Sdf.Path.IsValidIdentifier(name):
             raise ParameterError(
-                f"mesh name {mesh.name!r} is not a USD identifier (letters, digits, '_', "
-                "not starting with a digit)")
-        if mesh.name in names:
-            raise ParameterError(f"two meshes are named {mesh.name!r}")
-        names.add(mesh.name)
-        label = f"mesh {mesh.name!r}"
-        points = frames_array(f"{label} vertices", mesh.vertices, allow_static=True)
-        n_vertices = points.shape[-2]
-        if points.ndim == 3:
-            frame_counts.add(points.shape[0])
-        faces = faces_array(f"{label} faces", mesh.faces, n_vertices)
-        uv = uv_arrays(mesh.uvs, mesh.face_uvs, faces, n_vertices)
-        color = None
-        if mesh.display_color is not None:
-            color = np.asarray(mesh.display_color, dtype=np.float32)
-            if color.shape == (3,):
-                color = color[None]
-            elif color.shape != (n_vertices, 3):
-                raise ParameterError(
-                    f"{label} display_color must have shape (3,) or ({n_vertices},3), got {color.shape}")
-            if not np.isfinite(color).all():
-                raise ParameterError(f"{label} display_color contains NaN or infinite values")
-        points = to_up(points, up_axis)
-        if meters_per_unit != 1.0:
-            points = points / meters_per_unit
-        points = np.ascontiguousarray(points, dtype=np.float32)
-        checked.append(_Checked(mesh.name, points, faces, uv, color))
-    if len(frame_counts) > 1:
-        raise ParameterError(f"animated meshes have different frame counts: {sorted(frame_counts)}")
-    return checked
+                f"mesh name {name!r} is not a USD identifier (letters, digits, '_', not starting with a digit)")
+    return checked_meshes(meshes, up_axis, meters_per_unit, "write_usd")
 
 
-def _define_mesh(stage, mesh: _Checked) -> None:
+def _define_mesh(stage, mesh: CheckedMesh) -> None:
     """Author one ``UsdGeom.Mesh`` under /Root."""
     from pxr import Sdf, Usd, UsdGeom, Vt
 

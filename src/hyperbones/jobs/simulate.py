@@ -18,7 +18,7 @@ from tqdm import tqdm
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
 from hyperbones.errors import ParameterError
-from hyperbones.export import UsdMesh, write_frames_npz, write_obj_sequence, write_pc2, write_usd
+from hyperbones.export import SceneMesh, write_frames_npz, write_gltf, write_obj_sequence, write_pc2, write_usd
 from hyperbones.garment.draped import draped_garment
 from hyperbones.garment.garment import Garment
 from hyperbones.geometry.boundary import lowest_loop
@@ -121,12 +121,18 @@ def _runtime_record(solver) -> dict | None:
 
 
 def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,
-                      progress: bool = True) -> dict[str, Path]:
+                      progress: bool = True, gltf: bool = False) -> dict[str, Path]:
     """Write the output contract into ``out_dir`` (and, with ``obj``, an OBJ per frame into
-    ``out_dir/obj``); returns the written paths by kind. All or nothing (``staged_outputs``):
-    when one file cannot be written, none of the set replaces an earlier run's."""
+    ``out_dir/obj``; with ``gltf``, body and garment animated in ``out_dir/scene.glb``);
+    returns the written paths by kind. All or nothing (``staged_outputs``): when one file
+    cannot be written, none of the set replaces an earlier run's."""
+    from hyperbones.viz.scene import BODY_COLOR
+
     garment = result.garment
     out = Path(out_dir)
+    meshes = [SceneMesh("body", result.body_vertices.numpy(), result.body_faces.numpy(), display_color=BODY_COLOR),
+              SceneMesh("garment", result.garment_vertices.numpy(), garment.faces.numpy(),
+                        uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy(), display_color=GARMENT_COLOR)]
     with staged_outputs(out) as staging:
         names = {
             "frames": write_frames_npz(staging / "frames.npz", garment_vertices=result.garment_vertices,
@@ -134,15 +140,12 @@ def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bo
                                        body_faces=result.body_faces, joint_positions=result.joint_positions,
                                        fps=result.fps).name,
             "pc2": write_pc2(staging / "garment.pc2", result.garment_vertices.numpy(), fps=result.fps).name,
-            "usd": write_usd(staging / "scene.usd", [
-                UsdMesh("body", result.body_vertices.numpy(), result.body_faces.numpy()),
-                UsdMesh("garment", result.garment_vertices.numpy(), garment.faces.numpy(),
-                        uvs=garment.uvs.numpy(), face_uvs=garment.face_uvs.numpy(), display_color=GARMENT_COLOR),
-            ], fps=result.fps).name,
+            "usd": write_usd(staging / "scene.usd", meshes, fps=result.fps).name,
         }
+        if gltf:
+            names["gltf"] = write_gltf(staging / "scene.glb", meshes, fps=result.fps).name
         if preview:
             from hyperbones.viz.preview import MeshSequence, render_preview
-            from hyperbones.viz.scene import BODY_COLOR
 
             m = result.metrics
             title = f"{m['method']} | {m['garment']} | {m['motion']} | body {m['body']}"
