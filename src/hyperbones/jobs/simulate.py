@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -52,7 +53,8 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                    vertices: int | None = None, piece: int | None = None, material: str | None = None,
                    blend_in: int = DEFAULT_BLEND_IN, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
                    source_fps: float | None = None, progress: bool = False,
-                   uv_resolution: int | None = None, runtime: str | dict | None = None) -> SimulationResult:
+                   uv_resolution: int | None = None, runtime: str | dict | None = None,
+                   report: Callable[[str, float], None] | None = None) -> SimulationResult:
     """Simulate ``garment`` on ``body`` through ``motion`` with ``method``; compute all metrics.
 
     ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
@@ -61,24 +63,35 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
     R for the hyperbones methods (default: the model's training one); ``runtime``: settings
     (``--runtime`` text or a dict) over the checkpoint's ``RuntimeConfig``. The metrics record
     the runtime settings used (``runtime``; None for methods without the runtime).
+    ``report(stage, fraction)``, when given, hears what is being done and how much of the
+    run is done (a viewer's progress bar).
     """
+    report = report or _silent
     if method not in METHODS:
         raise ParameterError(f"unknown method {method!r}; available: {', '.join(METHODS)}")
     if frames is not None and frames < 1:
         raise ParameterError(f"--frames must be >= 1, got {frames}")
     overrides = parse_overrides(runtime)
     shape = BodyShape.parse(body)
+    cloth = Material.parse(material)
+    report("making the body", 0.0)
     the_body = body_for(shape)
+    report("retargeting the motion", 0.05)
     the_motion = load_motion(motion, the_body, blend_in=blend_in, hold=hold, source_fps=source_fps)
     if frames is not None:
         the_motion = the_motion.slice(0, frames)
-    cloth = Material.parse(material)
+    report("draping the garment on the body", 0.1)
     draped, rest_vertices = draped_garment(garment, the_body, vertices=vertices, piece=piece, material=cloth)
+    report("posing the body", 0.3)
     posed = the_body.pose(the_motion.joint_rotations, the_motion.root_translation)
+    report(f"encoding the garment and body ({method})", 0.35)
     extra = {"uv_resolution": uv_resolution, "runtime": overrides} if method.startswith("hyperbones") else {}
     solver = METHODS[method](draped, the_body, rest_vertices=rest_vertices, material=cloth, checkpoint=checkpoint,
                              device=device, progress=progress, **extra)
-    garment_vertices, frame_ms = _timed_frames(solver, posed, method, progress)
+    garment_vertices, frame_ms = _timed_frames(solver, posed, method, progress,
+                                               lambda done, total: report(f"simulating frame {done}/{total}",
+                                                                          0.4 + 0.55 * done / total))
+    report("measuring the garment", 0.95)
     rest = ClothRest.from_mesh(rest_vertices.double(), draped.faces, cloth)
     metrics = sequence_metrics(garment_vertices, rest, posed.vertices, the_body.faces,
                                origin=posed.joint_positions[0, 0], dt=1.0 / the_motion.fps,
@@ -97,20 +110,28 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                             posed.joint_positions, the_motion.fps, metrics, rest.vertex_masses.float())
 
 
-def _timed_frames(solver, posed, method: str, progress: bool) -> tuple[torch.Tensor, torch.Tensor]:
+def _silent(stage: str, fraction: float) -> None:
+    """A ``report`` that tells no one."""
+
+
+def _timed_frames(solver, posed, method: str, progress: bool,
+                  on_frame: Callable[[int, int], None] = lambda done, total: None) -> tuple[torch.Tensor, torch.Tensor]:
     """Step ``solver`` through ``posed`` frame by frame: (T,V,3) garment positions on the CPU and
     (T,) milliseconds each frame took (CUDA work finished before the clock is read), so a run
-    reports the spread of its frame times (median, 95th percentile), not only their mean."""
+    reports the spread of its frame times (median, 95th percentile), not only their mean.
+    ``on_frame(done, total)`` hears of each finished frame."""
     positions, times = [], []
     frames = solver.frames(posed)
     device = getattr(solver, "device", None)
-    for _ in tqdm(range(posed.joint_rotations.shape[0]), desc=method, disable=not progress, unit="frame"):
+    total = posed.joint_rotations.shape[0]
+    for done in tqdm(range(1, total + 1), desc=method, disable=not progress, unit="frame"):
         start = time.perf_counter()
         frame = next(frames)
         if isinstance(device, torch.device) and device.type == "cuda":
             torch.cuda.synchronize(device)
         times.append(1000.0 * (time.perf_counter() - start))
         positions.append(frame.cpu())
+        on_frame(done, total)
     return torch.stack(positions), torch.tensor(times, dtype=torch.float64)
 
 
