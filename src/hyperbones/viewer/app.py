@@ -57,6 +57,7 @@ class Viewer:
         self._wake = threading.Event()
         self._closed = threading.Event()
         self._meshes: dict[str, object] = {}
+        self._frame = 0  # the frame on screen; the frame slider shows it and a user's drag sets it
         self._build_gui(choice, _unique([choice.garment, *garments]), _unique([choice.motion, *motions]), playing)
         self._worker = threading.Thread(target=self._work, name="viewer-scenes", daemon=True)
         self._player = threading.Thread(target=self._play, name="viewer-playback", daemon=True)
@@ -90,7 +91,7 @@ class Viewer:
         self.metrics = gui.add_markdown("")
         for control in [self.garment, self.motion, self.method, *self.body.values(), *self.fabric.values()]:
             control.on_update(lambda _event: self.ask(self.choice_from_controls()))
-        self.frame.on_update(lambda _event: self._show(int(self.frame.value)))
+        self.frame.on_update(self._scrubbed)
         self._frames_and_size = (choice.frames, choice.vertices)
 
     def choice_from_controls(self) -> Choice:
@@ -164,11 +165,12 @@ class Viewer:
         body = np.ascontiguousarray(result.body_vertices.numpy(), dtype=np.float32)
         garment = np.ascontiguousarray(result.garment_vertices.numpy(), dtype=np.float32)
         with self._lock:
-            frame = min(int(self.frame.value), body.shape[0] - 1)
+            frame = self._frame = min(self._frame, body.shape[0] - 1)
             self._put("body", body[frame], result.body_faces.numpy(), BODY_RGB)
             self._put("garment", garment[frame], result.garment.faces.numpy(), GARMENT_RGB)
             self.result, self.shown = replace(result, body_vertices=body, garment_vertices=garment), choice
             self.frame.max = max(body.shape[0] - 1, 1)
+        self.frame.value = frame
         metrics = result.metrics
         self.metrics.content = (f"{body.shape[0]} frames at {metrics['fps']:g} fps, {metrics['garment_vertices']} "
                                 f"garment vertices, {metrics['ms_median']:.1f} ms a frame (median); edge error "
@@ -192,12 +194,20 @@ class Viewer:
             f"/{name}", vertices, faces.astype(np.uint32), color=color, side="double")
 
     def _show(self, frame: int) -> None:
+        """Frame ``frame`` of the scene on screen (clamped to its length), and on the frame slider."""
         with self._lock:
             if self.result is None:
                 return
-            frame = min(max(frame, 0), self.result.body_vertices.shape[0] - 1)
+            frame = self._frame = min(max(frame, 0), self.result.body_vertices.shape[0] - 1)
             self._meshes["body"].vertices = self.result.body_vertices[frame]
             self._meshes["garment"].vertices = self.result.garment_vertices[frame]
+        self.frame.value = frame
+
+    def _scrubbed(self, event) -> None:
+        """The frame slider moved: by a user (a client), show that frame; by the player or
+        ``_show`` (no client), it already is."""
+        if event.client is not None:
+            self._show(int(self.frame.value))
 
     # The player: steps the frame at the motion's rate while "Play" is ticked.
     def _play(self) -> None:
@@ -208,7 +218,7 @@ class Viewer:
                 time.sleep(0.05)
                 due = time.perf_counter()
                 continue
-            self.frame.value = (int(self.frame.value) + 1) % result.body_vertices.shape[0]
+            self._show((self._frame + 1) % result.body_vertices.shape[0])
             due += 1.0 / result.fps
             time.sleep(max(0.0, due - time.perf_counter()))
             due = max(due, time.perf_counter() - 0.5)  # after a stall, no burst of catching up
