@@ -53,7 +53,9 @@ def add_view(sub) -> None:
                            "(default: walk)")
     view.add_argument("--method", default="hyperbones", help="hyperbones or lbs (default: hyperbones)")
     options.add_body(view)
-    options.add_vertices(view)
+    view.add_argument("--vertices", type=int, default=2500,
+                      help="template resolution in vertices (default: 2500, so that a new body or fabric is "
+                           "draped in seconds rather than a minute)")
     view.add_argument("--frames", type=int, default=300,
                       help="the first N frames of each motion (default: 300, ten seconds)")
     options.add_checkpoint(view)

@@ -20,6 +20,7 @@ from hyperbones.jobs.simulate import GARMENT_COLOR, SimulationResult, run_simula
 from hyperbones.viewer.choice import FABRIC_FIELDS, FABRIC_RANGE, VIEW_METHODS, Choice
 
 BODY_RGB = (219, 184, 158)
+GROUND_CELL = 0.25  # m
 GARMENT_RGB = tuple(int(round(255 * channel)) for channel in GARMENT_COLOR)
 
 
@@ -48,7 +49,10 @@ class Viewer:
         self.server.scene.set_up_direction("+z")
         self.server.initial_camera.position = (0.0, -2.6, 1.2)
         self.server.initial_camera.look_at = (0.0, 0.0, 0.9)
-        self.server.scene.add_grid("/ground", width=4.0, height=4.0, plane="xy", cell_size=0.25)
+        # The camera stays on the character: the meshes move back by the Hips' ground position,
+        # and the floor by the same modulo its cells (the character walks over a still floor).
+        self._world = self.server.scene.add_frame("/world", show_axes=False)
+        self._ground = self.server.scene.add_grid("/ground", width=6.0, height=6.0, plane="xy", cell_size=GROUND_CELL)
         self.result: SimulationResult | None = None  # the scene shown
         self.shown: Choice | None = None
         self.ready = threading.Event()  # set while the shown scene is the one last asked for
@@ -169,6 +173,8 @@ class Viewer:
             self._put("body", body[frame], result.body_faces.numpy(), BODY_RGB)
             self._put("garment", garment[frame], result.garment.faces.numpy(), GARMENT_RGB)
             self.result, self.shown = replace(result, body_vertices=body, garment_vertices=garment), choice
+            self._centres = result.joint_positions[:, 0, :2].numpy().astype(np.float64)  # (T,2) the Hips over the floor
+            self._follow(frame)
             self.frame.max = max(body.shape[0] - 1, 1)
         self.frame.value = frame
         metrics = result.metrics
@@ -191,7 +197,7 @@ class Viewer:
         if handle is not None:
             handle.remove()
         self._meshes[name] = self.server.scene.add_mesh_simple(
-            f"/{name}", vertices, faces.astype(np.uint32), color=color, side="double")
+            f"/world/{name}", vertices, faces.astype(np.uint32), color=color, side="double")
 
     def _show(self, frame: int) -> None:
         """Frame ``frame`` of the scene on screen (clamped to its length), and on the frame slider."""
@@ -201,7 +207,14 @@ class Viewer:
             frame = self._frame = min(max(frame, 0), self.result.body_vertices.shape[0] - 1)
             self._meshes["body"].vertices = self.result.body_vertices[frame]
             self._meshes["garment"].vertices = self.result.garment_vertices[frame]
+            self._follow(frame)
         self.frame.value = frame
+
+    def _follow(self, frame: int) -> None:
+        """Keep frame ``frame``'s Hips over the origin, the floor moving under them."""
+        x, y = self._centres[frame]
+        self._world.position = (-x, -y, 0.0)
+        self._ground.position = (-(x % GROUND_CELL), -(y % GROUND_CELL), 0.0)
 
     def _scrubbed(self, event) -> None:
         """The frame slider moved: by a user (a client), show that frame; by the player or

@@ -9,14 +9,14 @@ from hyperbones.physics.material import Material
 
 VIEW_METHODS = {"HyperBones": "hyperbones", "LBS (skinning only)": "lbs"}
 # Fabric sliders: each scales fields of the default cloth (HOOD's) by its factor.
-FABRIC_FIELDS = {"stretch": ("lame_mu", "lame_lambda"), "bending": ("bending",), "weight": ("density",)}
+FABRIC_FIELDS = {"stretch": ("lame_mu", "lame_lambda"), "bending": ("bending",), "density": ("density",)}
 FABRIC_RANGE = (0.25, 4.0)
 
 
 @dataclass(frozen=True)
 class Choice:
     """One scene: garment (a template or a file), motion (a built-in or a .bvh file), method
-    (a ``jobs.methods`` name), body shape, fabric factors ({"stretch", "bending", "weight"} ->
+    (a ``jobs.methods`` name), body shape, fabric factors ({"stretch", "bending", "density"} ->
     a factor of the default cloth's), vertices (a template's resolution; None: the default)
     and frames (the first N of the motion; None: all)."""
 
@@ -25,7 +25,7 @@ class Choice:
     method: str = "hyperbones"
     body: BodyShape = BodyShape()
     fabric: tuple[tuple[str, float], ...] = field(default=tuple((name, 1.0) for name in FABRIC_FIELDS))
-    vertices: int | None = None
+    vertices: int | None = 2500
     frames: int | None = 300
 
     def material(self) -> Material:
