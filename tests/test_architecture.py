@@ -8,7 +8,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "src" / "hyperbones"
 # Lower numbers sit lower: a module may import its own package and any lower layer.
 LAYER = {"errors": 0, "io_utils": 0, "devices": 0, "geometry": 1, "physics": 2, "body": 3, "motion": 3,
          "garment": 3, "export": 3, "viz": 3, "rig": 4, "models": 4, "runtime": 5, "training": 5, "jobs": 6,
-         "cli": 7}
+         "viewer": 7, "cli": 8}
 # Within a layer, these may import one another in the direction given and no other.
 SIDEWAYS = {("training", "runtime"), ("garment", "body"), ("motion", "body"), ("viz", "body"), ("viz", "motion"),
             ("devices", "errors"), ("io_utils", "errors")}
