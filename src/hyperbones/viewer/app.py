@@ -55,7 +55,7 @@ class Viewer:
         self._ground = self.server.scene.add_grid("/ground", width=6.0, height=6.0, plane="xy", cell_size=GROUND_CELL)
         self.result: SimulationResult | None = None  # the scene shown
         self.shown: Choice | None = None
-        self.ready = threading.Event()  # set while the shown scene is the one last asked for
+        self.ready = threading.Event()  # set while nothing asked for is still being made
         self._wanted = choice
         self._lock = threading.Lock()
         self._wake = threading.Event()
@@ -115,7 +115,8 @@ class Viewer:
         self._wake.set()
 
     def wait_ready(self, timeout: float | None = None) -> bool:
-        """Block until the scene last asked for is shown; False on timeout."""
+        """Block until the scene last asked for is shown, or could not be made (the status line
+        says why and the last scene stays); False on timeout."""
         return self.ready.wait(timeout)
 
     def close(self) -> None:
