@@ -14,14 +14,14 @@ from hyperbones.io_utils import is_output_fault
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from hyperbones.cli import animation, check, garments, simulation, training, viewer
+    from hyperbones.cli import animation, check, engine, garments, simulation, training, viewer
 
     parser = argparse.ArgumentParser(
         prog="hyperbones",
         description="Garments that move with an animated body in real time. Units: metres, Z up, 30 fps.",
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for group in (simulation, animation, viewer, garments, training, check):
+    for group in (simulation, animation, viewer, engine, garments, training, check):
         for add in group.VERBS:
             add(sub)
     return parser

@@ -65,7 +65,8 @@ def run_simulate(args) -> int:
 
 METHOD_HELP = ("hyperbones: the shipped model's per-frame runtime (the garment follows Module A's output, is "
                "pushed out of the body and has its edges pulled back to length each frame); hyperbones-raw: "
-               "Module A alone; lbs: skinning, no dynamics; teacher: the physics-trained MeshGraphNet; physics: "
+               "Module A alone; hyperbones-onnx: the runtime exported to ONNX (export-onnx) run by onnxruntime, "
+               "without body contact; lbs: skinning, no dynamics; teacher: the physics-trained MeshGraphNet; physics: "
                "each frame's energy minimised by L-BFGS (slow, the teacher's reference)")
 
 

@@ -94,3 +94,13 @@ def minimal_rotation(src: torch.Tensor, dst: torch.Tensor) -> torch.Tensor:
     axis = torch.where(sin < 1e-9, fallback, axis)
     axis = axis / axis.norm(dim=-1, keepdim=True)
     return roma.rotvec_to_rotmat(axis * angle)
+
+
+def rigid_inverse(transform: torch.Tensor) -> torch.Tensor:
+    """(...,4,4) rigid transforms [R t; 0 1] -> their inverses [Rᵀ −Rᵀt; 0 1]: exact for a
+    rotation R, cheaper than a general inverse, and expressible in ONNX (which has no
+    matrix inverse)."""
+    rotation_t = transform[..., :3, :3].transpose(-1, -2)
+    translation = -(rotation_t @ transform[..., :3, 3:])
+    top = torch.cat([rotation_t, translation], dim=-1)
+    return torch.cat([top, transform[..., 3:, :]], dim=-2)

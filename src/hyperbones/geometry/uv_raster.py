@@ -182,6 +182,11 @@ class UvRaster:
             return UvRaster(self.resolution, self.raster.to(device), self.sampler.to(device),
                             self.coverage.to(device))
 
+    def dense(self) -> "UvRaster":
+        """The same maps as dense matrices: the constants of an exported graph (ONNX has no
+        sparse product); (R²,V) and (V,R²) floats, so 8·R²·V bytes in all."""
+        return UvRaster(self.resolution, self.raster.to_dense(), self.sampler.to_dense(), self.coverage)
+
     def rasterize(self, values: torch.Tensor) -> torch.Tensor:
         """(N,V,C) per-vertex values -> (N,C,R,R) images."""
         batch, _, channels = values.shape

@@ -34,6 +34,12 @@ def _hyperbones_raw(*args, **kwargs):
     return HyperBonesMethod(*args, raw=True, **kwargs)
 
 
+def _hyperbones_onnx(*args, **kwargs):
+    from hyperbones.runtime.onnx_method import OnnxRuntimeMethod
+
+    return OnnxRuntimeMethod(*args, **kwargs)
+
+
 def _physics(*args, **kwargs):
     from hyperbones.training.physics_method import PhysicsMethod
 
@@ -41,6 +47,7 @@ def _physics(*args, **kwargs):
 
 
 METHODS = {"lbs": _lbs, "teacher": _teacher, "hyperbones": _hyperbones, "hyperbones-raw": _hyperbones_raw,
-           "physics": _physics}
+           "hyperbones-onnx": _hyperbones_onnx, "physics": _physics}
 """Method name -> constructor: lbs (skinning), teacher (Module C), hyperbones (the per-frame
-runtime), hyperbones-raw (Module A alone), physics (per-frame energy minimisation)."""
+runtime), hyperbones-raw (Module A alone), hyperbones-onnx (the runtime's exported graph,
+no body contact, in onnxruntime), physics (per-frame energy minimisation)."""

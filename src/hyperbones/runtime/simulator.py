@@ -29,6 +29,7 @@ import torch
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
+from hyperbones.geometry.rotations import rigid_inverse
 from hyperbones.geometry.surface import found_points
 from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
@@ -165,7 +166,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         with clock.stage("UV sampling"):
             stage_one = [points + identity.raster.sample(displacement[index])
                          for identity, points, index in zip(groups, stage_one, rows)]
-    to_world = torch.linalg.inv(to_local)
+    to_world = rigid_inverse(to_local)  # heading frames are rigid
     garments: list[torch.Tensor | None] = [None] * len(batch.identities)
     for (_, group_rows), points, index in zip(batch.groups, stage_one, rows):
         for row, world in zip(group_rows, transform_points(to_world[index], points)):
@@ -389,7 +390,7 @@ class Simulator:
         settings = self.config
         if settings.follows and self.last_output is not None:
             with clock.stage("follow"):
-                motion = torch.linalg.inv(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
+                motion = rigid_inverse(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
                 carrier = (motion if self.last_motion is None
                            else motion + settings.carry_lag * (self.last_motion - motion))
                 carried, on_skin = zip(*[self._carried(i, carrier[i], bodies[i] if bodies is not None else None)
