@@ -81,7 +81,7 @@ class RuntimeFrame(nn.Module):
         window = torch.where(first, positions.expand(self.window_frames, -1, -1),
                              torch.cat([bone_window[1:], positions], dim=0))
         garment = module_a_frame(self.module_a, self.batch, window[None], rotations, positions, to_local,
-                                 conv_mlp=self.config.conv_mlp)[0]
+                                 conv_mlp=self.config.conv_mlp, invert=rigid_inverse)[0]
         motion = rigid_inverse(to_local[0]) @ last_to_local  # (4,4) the heading frames' motion
         settings = self.config
         if settings.follows:

@@ -29,7 +29,6 @@ import torch
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
-from hyperbones.geometry.rotations import rigid_inverse
 from hyperbones.geometry.surface import found_points
 from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
@@ -128,7 +127,7 @@ def grouped_rows(items: list[Item]) -> list[tuple[Item, list[int]]]:
 
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
                    positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK,
-                   conv_mlp: bool = True) -> list[torch.Tensor]:
+                   conv_mlp: bool = True, invert=torch.linalg.inv) -> list[torch.Tensor]:
     """One frame of Module A for N characters (differentiable; the trainer calls it too).
 
     Args:
@@ -138,6 +137,8 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         to_local: (N,4,4) world -> local frame of each character at t.
         clock: a ``StageClock`` to charge each stage's time to (none by default).
         conv_mlp: add the Conv-MLP's displacement (stage 2; ``RuntimeConfig.conv_mlp``).
+        invert: (N,4,4) -> (N,4,4) inverse of the heading frames (an exported graph passes
+            ``geometry.rotations.rigid_inverse``: ONNX has no matrix inverse).
 
     Returns:
         N tensors (V_i,3): world garment positions at t.
@@ -166,7 +167,7 @@ def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor
         with clock.stage("UV sampling"):
             stage_one = [points + identity.raster.sample(displacement[index])
                          for identity, points, index in zip(groups, stage_one, rows)]
-    to_world = rigid_inverse(to_local)  # heading frames are rigid
+    to_world = invert(to_local)
     garments: list[torch.Tensor | None] = [None] * len(batch.identities)
     for (_, group_rows), points, index in zip(batch.groups, stage_one, rows):
         for row, world in zip(group_rows, transform_points(to_world[index], points)):
@@ -390,7 +391,7 @@ class Simulator:
         settings = self.config
         if settings.follows and self.last_output is not None:
             with clock.stage("follow"):
-                motion = rigid_inverse(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
+                motion = torch.linalg.inv(to_local) @ self.last_to_local  # (N,4,4) the heading frames' motion
                 carrier = (motion if self.last_motion is None
                            else motion + settings.carry_lag * (self.last_motion - motion))
                 carried, on_skin = zip(*[self._carried(i, carrier[i], bodies[i] if bodies is not None else None)
