@@ -58,6 +58,8 @@ def test_export_onnx_command_writes_the_graph_its_contract_and_mesh(tmp_path, ca
     assert [node.name for node in session.get_outputs()] == list(OUTPUTS)
     for node in session.get_inputs():
         assert list(node.shape) == contract["inputs"][node.name]["shape"]
+    for node in session.get_outputs():
+        assert list(node.shape) == contract["outputs"][node.name]["shape"]
     vertex_lines = [line for line in (out / "garment.obj").read_text().splitlines() if line.startswith("v ")]
     assert len(vertex_lines) == contract["garment"]["vertices"] == session.get_outputs()[0].shape[0]
     assert contract["runtime"]["contact"] is False
