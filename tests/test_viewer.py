@@ -82,11 +82,11 @@ def test_viewer_page_shows_body_and_garment_and_a_slider_remakes_the_garment(pag
         garment, body = _garment_pixels(first), _body_pixels(first)
         assert garment.sum() > 2000, "no garment on the page"
         assert body.sum() > 2000, "no body on the page"
-        before = viewer.result.garment_vertices.copy()
+        before = viewer.garment_frames.copy()
 
         viewer.body["height"].value = 1.0  # as a user's drag does: viser calls the slider's callbacks
         assert viewer.wait_ready(600), viewer.status.content
-        after = viewer.result.garment_vertices
+        after = viewer.garment_frames
         assert viewer.shown.body.height == pytest.approx(1.0)
         # The t-shirt remade on a taller body (the template is fitted anew): its collar higher up.
         top = [frames[0, :, 2].max() for frames in (before, after)]

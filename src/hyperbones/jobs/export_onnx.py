@@ -9,9 +9,9 @@ from pathlib import Path
 
 from hyperbones.body.anny_body import body_for
 from hyperbones.body.shape import BodyShape
-from hyperbones.export import write_obj_sequence
 from hyperbones.garment.draped import draped_garment
 from hyperbones.garment.garment import Garment
+from hyperbones.garment.obj_io import write_obj_garment
 from hyperbones.io_utils import atomic_path, staged_outputs
 from hyperbones.physics.material import Material
 from hyperbones.runtime.onnx_frame import ONNX_OVERRIDES, OPSET, OUTPUTS, RuntimeFrame, write_onnx
@@ -68,8 +68,5 @@ def export_onnx(garment: str, out_dir: str | Path, body: str | None = None, mate
         write_onnx(frame, staging / "runtime.onnx")
         with atomic_path(staging / "contract.json") as tmp:
             tmp.write_text(json.dumps(contract(frame, draped), indent=2) + "\n")
-        mesh = write_obj_sequence(staging / "mesh", draped.vertices[None].numpy(), draped.faces.numpy(),
-                                  uvs=draped.uvs.numpy(), face_uvs=draped.face_uvs.numpy())[0]
-        mesh.rename(staging / "garment.obj")
-        (staging / "mesh").rmdir()
+        write_obj_garment(staging / "garment.obj", draped)
     return {"onnx": out / "runtime.onnx", "contract": out / "contract.json", "mesh": out / "garment.obj"}

@@ -50,7 +50,7 @@ class SimulationResult:
 
 
 def run_simulation(method: str, garment: str, motion: str, body: str | None = None, *, frames: int | None = None,
-                   vertices: int | None = None, piece: int | None = None, material: str | None = None,
+                   vertices: int | None = None, piece: int | None = None, material: str | Material | None = None,
                    blend_in: int = DEFAULT_BLEND_IN, hold: float = 0.0, checkpoint: str | None = None, device: str = "auto",
                    source_fps: float | None = None, progress: bool = False,
                    uv_resolution: int | None = None, runtime: str | dict | None = None,
@@ -59,7 +59,8 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
 
     ``checkpoint`` (learnt methods; default: the shipped model) and ``device`` ("auto":
     CUDA when present) apply to the learnt methods; LBS ignores them. ``source_fps`` is the
-    real capture rate of a BVH clip whose header is wrong. ``uv_resolution``: the UV maps'
+    real capture rate of a BVH clip whose header is wrong. ``material``: a ``Material`` or
+    ``--material`` text (None: the default cloth). ``uv_resolution``: the UV maps'
     R for the hyperbones methods (default: the model's training one); ``runtime``: settings
     (``--runtime`` text or a dict) over the checkpoint's ``RuntimeConfig``. The metrics record
     the runtime settings used (``runtime``; None for methods without the runtime).
@@ -73,7 +74,7 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
         raise ParameterError(f"--frames must be >= 1, got {frames}")
     overrides = parse_overrides(runtime)
     shape = BodyShape.parse(body)
-    cloth = Material.parse(material)
+    cloth = material if isinstance(material, Material) else Material.parse(material)
     report("making the body", 0.0)
     the_body = body_for(shape)
     report("retargeting the motion", 0.05)

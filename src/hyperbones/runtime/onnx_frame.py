@@ -20,13 +20,11 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
 from hyperbones.errors import ParameterError
 from hyperbones.geometry.rotations import rigid_inverse
 from hyperbones.io_utils import atomic_path
-from hyperbones.models.module_a import heading_frame
-from hyperbones.rig.virtual_bones import pose_bones
-from hyperbones.runtime.simulator import IdentityBatch, Simulator, module_a_frame, transform_points
+from hyperbones.runtime.simulator import (IdentityBatch, Simulator, module_a_frame, pose_characters,
+                                          transform_points)
 
 OPSET = 18
 # Settings the graph cannot hold or the engine does not want: contact is the engine's; the
@@ -72,11 +70,8 @@ class RuntimeFrame(nn.Module):
     def forward(self, joint_rotations: torch.Tensor, root_translation: torch.Tensor, bone_window: torch.Tensor,
                 last_vertices: torch.Tensor, last_to_local: torch.Tensor, last_motion: torch.Tensor,
                 frame: torch.Tensor) -> tuple[torch.Tensor, ...]:
-        rotations_in, roots = joint_rotations[None], root_translation[None]
-        joints = forward_kinematics(self.rest_joints, rotations_in, roots)
-        transforms = skinning_transforms(self.rest_joints, rotations_in, joints)  # (1,31,4,4)
-        rotations, positions = pose_bones(self.bone_joint_weights, self.bone_rest, transforms)
-        to_local = heading_frame(rotations_in[:, 0], roots)  # (1,4,4)
+        rotations, positions, to_local = pose_characters(self.rest_joints, self.bone_joint_weights, self.bone_rest,
+                                                         joint_rotations[None], root_translation[None])
         first = frame < 0.5  # (1,) the first frame fills the window
         window = torch.where(first, positions.expand(self.window_frames, -1, -1),
                              torch.cat([bone_window[1:], positions], dim=0))

@@ -125,6 +125,18 @@ def grouped_rows(items: list[Item]) -> list[tuple[Item, list[int]]]:
     return list(groups.values())
 
 
+def pose_characters(rest_joints: torch.Tensor, bone_joint_weights: torch.Tensor, bone_rest: torch.Tensor,
+                    joint_rotations: torch.Tensor, roots: torch.Tensor) -> tuple[torch.Tensor, ...]:
+    """N characters' skeletons to their virtual bones: (N,31,3) rest joints, (N,B,31) bone
+    weights, (N,B,3) rest bone positions, (N,31,3,3) world joint rotations, (N,3) Hips
+    positions -> (N,B,3,3) world bone rotations, (N,B,3) positions and (N,4,4) heading
+    frames (world -> local)."""
+    joints = forward_kinematics(rest_joints, joint_rotations, roots)
+    transforms = skinning_transforms(rest_joints, joint_rotations, joints)  # (N,31,4,4)
+    rotations, positions = pose_bones(bone_joint_weights, bone_rest, transforms)
+    return rotations, positions, heading_frame(joint_rotations[:, 0], roots)
+
+
 def module_a_frame(module_a: ModuleA, batch: IdentityBatch, window: torch.Tensor, rotations: torch.Tensor,
                    positions: torch.Tensor, to_local: torch.Tensor, clock=NO_CLOCK,
                    conv_mlp: bool = True, invert=torch.linalg.inv) -> list[torch.Tensor]:
@@ -374,11 +386,9 @@ class Simulator:
         with clock.stage("forward kinematics"):
             rotations_in = joint_rotations.detach().to("cpu", torch.float32)
             roots = root_translation.detach().to("cpu", torch.float32)
-            joints = forward_kinematics(self.rest_joints, rotations_in, roots)
-            transforms = skinning_transforms(self.rest_joints, rotations_in, joints)  # (N,31,4,4)
-            rotations, positions = pose_bones(self.bone_joint_weights, self.bone_rest, transforms)
-            to_local = heading_frame(rotations_in[:, 0], roots).to(self.device)
-            rotations, positions = rotations.to(self.device), positions.to(self.device)
+            rotations, positions, to_local = pose_characters(self.rest_joints, self.bone_joint_weights,
+                                                             self.bone_rest, rotations_in, roots)
+            rotations, positions, to_local = (tensor.to(self.device) for tensor in (rotations, positions, to_local))
         if self.window is None:
             frames = self.module_a.config.window_frames
             self.window = positions[:, None].expand(count, frames, *positions.shape[1:]).clone()

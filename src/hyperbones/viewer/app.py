@@ -54,6 +54,9 @@ class Viewer:
         self._world = self.server.scene.add_frame("/world", show_axes=False)
         self._ground = self.server.scene.add_grid("/ground", width=6.0, height=6.0, plane="xy", cell_size=GROUND_CELL)
         self.result: SimulationResult | None = None  # the scene shown
+        # Its frames as the meshes take them: (T,Vb,3) and (T,V,3) float32; (T,2) the Hips over the floor.
+        self.body_frames = self.garment_frames = self._centres = None
+        self._initial = choice  # what the controls do not set (frames, vertices)
         self.shown: Choice | None = None
         self.ready = threading.Event()  # set while nothing asked for is still being made
         self._wanted = choice
@@ -96,15 +99,13 @@ class Viewer:
         for control in [self.garment, self.motion, self.method, *self.body.values(), *self.fabric.values()]:
             control.on_update(lambda _event: self.ask(self.choice_from_controls()))
         self.frame.on_update(self._scrubbed)
-        self._frames_and_size = (choice.frames, choice.vertices)
 
     def choice_from_controls(self) -> Choice:
         """The scene the controls describe now."""
-        frames, vertices = self._frames_and_size
-        return Choice(garment=self.garment.value, motion=self.motion.value, method=VIEW_METHODS[self.method.value],
-                      body=BodyShape(**{key: float(slider.value) for key, slider in self.body.items()}),
-                      fabric=tuple((name, float(self.fabric[name].value)) for name in FABRIC_FIELDS),
-                      vertices=vertices, frames=frames)
+        return replace(self._initial, garment=self.garment.value, motion=self.motion.value,
+                       method=VIEW_METHODS[self.method.value],
+                       body=BodyShape(**{key: float(slider.value) for key, slider in self.body.items()}),
+                       fabric=tuple((name, float(self.fabric[name].value)) for name in FABRIC_FIELDS))
 
     def ask(self, choice: Choice) -> None:
         """Show ``choice`` once it is made (the current scene plays on until then)."""
@@ -162,7 +163,7 @@ class Viewer:
 
         self.progress.visible = True
         return run_simulation(choice.method, choice.garment, choice.motion, choice.body.label(),
-                              frames=choice.frames, vertices=choice.vertices, material=choice.material_text(),
+                              frames=choice.frames, vertices=choice.vertices, material=choice.material(),
                               checkpoint=self.checkpoint, report=report)
 
     def _install(self, choice: Choice, result: SimulationResult) -> None:
@@ -173,7 +174,7 @@ class Viewer:
             frame = self._frame = min(self._frame, body.shape[0] - 1)
             self._put("body", body[frame], result.body_faces.numpy(), BODY_RGB)
             self._put("garment", garment[frame], result.garment.faces.numpy(), GARMENT_RGB)
-            self.result, self.shown = replace(result, body_vertices=body, garment_vertices=garment), choice
+            self.result, self.shown, self.body_frames, self.garment_frames = result, choice, body, garment
             self._centres = result.joint_positions[:, 0, :2].numpy().astype(np.float64)  # (T,2) the Hips over the floor
             self._follow(frame)
             self.frame.max = max(body.shape[0] - 1, 1)
@@ -205,9 +206,9 @@ class Viewer:
         with self._lock:
             if self.result is None:
                 return
-            frame = self._frame = min(max(frame, 0), self.result.body_vertices.shape[0] - 1)
-            self._meshes["body"].vertices = self.result.body_vertices[frame]
-            self._meshes["garment"].vertices = self.result.garment_vertices[frame]
+            frame = self._frame = min(max(frame, 0), self.body_frames.shape[0] - 1)
+            self._meshes["body"].vertices = self.body_frames[frame]
+            self._meshes["garment"].vertices = self.garment_frames[frame]
             self._follow(frame)
         self.frame.value = frame
 
@@ -232,7 +233,7 @@ class Viewer:
                 time.sleep(0.05)
                 due = time.perf_counter()
                 continue
-            self._show((self._frame + 1) % result.body_vertices.shape[0])
+            self._show((self._frame + 1) % result.metrics["frames"])
             due += 1.0 / result.fps
             time.sleep(max(0.0, due - time.perf_counter()))
             due = max(due, time.perf_counter() - 0.5)  # after a stall, no burst of catching up

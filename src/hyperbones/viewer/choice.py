@@ -36,10 +36,3 @@ class Choice:
             for key in FABRIC_FIELDS[name]:
                 scaled[key] = getattr(cloth, key) * factor
         return replace(cloth, **scaled)
-
-    def material_text(self) -> str:
-        """``material()`` as ``Material.parse`` reads it."""
-        return ",".join(f"{key}={value!r}" for key, value in self.material().as_dict().items())
-
-    def with_fabric(self, **factors: float) -> "Choice":
-        return replace(self, fabric=tuple((name, factors.get(name, value)) for name, value in self.fabric))
