@@ -191,3 +191,13 @@ def test_the_gpu_phase2_settings_make_a_valid_config_for_the_run_and_its_smoke_c
     assert run_config.joint.frames_per_step > run_config.joint.frames_per_rollout > 1
     smoke = apply_overrides(run_config, QUICK_JOINT)
     assert smoke.joint.frames_per_step == smoke.joint.frames_per_rollout == 1
+
+
+def test_the_throughput_call_names_a_missing_pack_in_one_line(tmp_path):
+    """scripts/device/throughput.sh stops before any Python when a pack is not prepared."""
+    done = subprocess.run(["bash", str(ROOT / "scripts/device/throughput.sh")], cwd=ROOT, capture_output=True,
+                          text=True, timeout=60, env={**os.environ, "TRAIN_FOLDER": str(tmp_path), "OUT": str(tmp_path)})
+    assert done.returncode == 2
+    assert done.stderr.strip() == (f"throughput.sh: {tmp_path}/teacher.pack.pt missing: "
+                                   "run scripts/device/train.sh --prepare teacher first")
+    assert not (tmp_path / "throughput.md").exists()

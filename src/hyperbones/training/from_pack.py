@@ -105,6 +105,23 @@ def trainer_for(config, run_dir, pack: TrainingPack, **options):
     return kind(config, run_dir, pack, **options)
 
 
+def timed_steps(trainer, steps: int, warmup: int = 2) -> list[float]:
+    """Seconds of each of ``steps`` optimiser steps of a pack trainer after ``warmup`` untimed
+    ones (a first batch of episodes or a filled rollout cache, then a warm step), synchronised
+    with the device at both ends of each: ``scripts/device/phase*_steps.py``'s measure."""
+    sync = torch.cuda.synchronize if trainer.device.type == "cuda" else (lambda: None)
+    seconds = []
+    for index in range(warmup + steps):
+        sync()
+        start = time.perf_counter()
+        trainer._advance()
+        trainer.step += 1
+        sync()
+        if index >= warmup:
+            seconds.append(time.perf_counter() - start)
+    return seconds
+
+
 QUICK_TRAINING = ("train.log_every=1", "train.rollout_start=2", "train.rollout_max=2", "train.rollout_ramp_steps=0")
 """``--quick``'s training settings (with ``training.pack.QUICK_DATA``); phase 2 adds ``QUICK_JOINT``."""
 QUICK_JOINT = ("joint.rollout_frames=6", "joint.cache_size=2", "joint.refresh_every=2", "joint.frames_per_step=1",
