@@ -236,3 +236,17 @@ def test_phase_2_refuses_a_pack_without_its_bones(packs, tmp_path):
                     TrainingPack(teacher_pack), progress=False)
     assert main(["--pack", str(teacher_pack), "--config", str(joint_config), "--out", str(tmp_path / "b"),
                  "--device", "cpu", "--quiet"]) == 2
+
+
+def test_timed_steps_times_the_steps_after_the_warm_up(packs, tmp_path):
+    """``timed_steps`` (the device scripts' measure): one time per step after the warm-up,
+    every step taken and counted, a batch of B counting B episode-steps."""
+    from hyperbones.training.from_pack import timed_steps, trainer_for
+
+    _, teacher_config, teacher_pack, _, _ = packs
+    config = apply_overrides(load_config(teacher_config), ["train.device=cpu"])
+    trainer = trainer_for(config, tmp_path / "timed", TrainingPack(teacher_pack), batch=2, progress=False)
+    seconds = timed_steps(trainer, 3, warmup=1)
+    trainer.close()
+    assert len(seconds) == 3 and all(value > 0 for value in seconds)
+    assert trainer.step == 4 and trainer.episode_steps == 8
