@@ -11,9 +11,9 @@ scripts/device/throughput.sh's call, after phase 1's counterpart (phase1_steps.p
 Results: docs/experiments/2026-11-28-phase2-frames-in-batches.md.
 """
 
+import argparse
 import os
 import statistics
-import sys
 import tempfile
 
 import torch
@@ -41,15 +41,21 @@ def step_seconds(pack: TrainingPack, device: torch.device, frames: int, per_roll
 
 
 def main() -> None:
-    arguments = [argument for argument in sys.argv[1:] if argument != "--quick"]
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("pack")
+    parser.add_argument("device")
+    parser.add_argument("sizes", nargs="+", help="F/G: frames a step / frames from each rollout")
+    parser.add_argument("--quick", action="store_true",
+                        help="a pack made with --prepare --quick (a check on this machine)")
+    args = parser.parse_args()
     data = ()
-    if "--quick" in sys.argv:  # a pack made with --prepare --quick (a check on this machine)
+    if args.quick:
         from hyperbones.training.pack import QUICK_DATA  # reaches Anny: here, not on the GPU machine
 
         data = QUICK_DATA
-    pack, device = TrainingPack(arguments[0]), torch.device(arguments[1])
+    pack, device = TrainingPack(args.pack), torch.device(args.device)
     print("| frames a step | frames a rollout | ms a step (median) | episode-steps/s |\n|---:|---:|---:|---:|")
-    for size in arguments[2:]:
+    for size in args.sizes:
         frames, per_rollout = (int(value) for value in size.split("/"))
         try:
             median = statistics.median(step_seconds(pack, device, frames, per_rollout, data))
