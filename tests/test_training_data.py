@@ -31,10 +31,12 @@ def test_episodes_get_hops_on_their_root(body):
     assert float(still.body_vertices[..., 2].amin(-1).max() - still.body_vertices[..., 2].amin(-1).min()) < 0.03
 
 
-def test_draped_identities_settle_the_carried_garment(body):
+def test_draped_identities_settle_the_carried_garment(body, tmp_path, monkeypatch):
     """data.drape: the garment a rollout starts from (and bones bind to) is the carried one
     settled on the body, cached on disk; the physics rest shape stays the carried one."""
     from dataclasses import replace
+
+    monkeypatch.setenv("HYPERBONES_CACHE_DIR", str(tmp_path))  # its own cache: it counts the files
 
     from hyperbones.body.shape import BodyShape
     from hyperbones.physics.material import Material
