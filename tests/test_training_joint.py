@@ -183,6 +183,7 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert [f.name for f in files] == ["rollout-s3-00000.pt", "rollout-s3-00001.pt", "rollout-s3-00002.pt"]
     records = [load_rollout(f) for f in files]
     assert records[0]["positions"].dtype == torch.float16 and records[0]["version"] == 1
+    assert records[0]["network_dtype"] == "float32"
     assert len({(r["shape"]["weight"], r["motion"]) for r in records}) == 3  # three different draws
 
     trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=1)
@@ -199,9 +200,11 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert carried.physics.draped is False
     assert torch.equal(carried.physics.garment.vertices, rollout.physics.garment.vertices)
     draping_trainer.close()
-    # A draped share in the same bank (hyperbones rollouts --drape): the undraped run rebuilds it draped.
-    [draped_file] = generate_bank(draping, bank, count=1, seed=4, progress=False)
+    # A draped share in the same bank (hyperbones rollouts --drape), made with the teacher in
+    # bfloat16 (--bfloat16): the undraped run rebuilds it draped.
+    [draped_file] = generate_bank(draping, bank, count=1, seed=4, progress=False, bfloat16=True)
     assert load_rollout(draped_file)["draped"] is True
+    assert load_rollout(draped_file)["network_dtype"] == "bfloat16"
     mixed = trainer.cache.load(draped_file)
     assert mixed.physics.draped is True
     assert not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)

@@ -104,7 +104,8 @@ def run_rollouts(args) -> int:
         config = replace(config, data=replace(config.data, templates=templates))
     if args.drape:
         config = replace(config, data=replace(config.data, drape=True))
-    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet, compile_teacher=args.compile)
+    generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet, compile_teacher=args.compile,
+                  bfloat16=args.bfloat16)
     return 0
 
 
@@ -127,6 +128,10 @@ def add_rollouts(sub) -> None:
     rollouts.add_argument("--compile", action="store_true",
                           help="compile the teacher's network (torch.compile): ~1.2-1.35x faster rollouts on the CPU "
                                "after 10-30 s of compiling, for a long bank; needs a C++ compiler (gcc or clang)")
+    rollouts.add_argument("--bfloat16", action="store_true",
+                          help="run the teacher's network in bfloat16 (autocast; the physics stays float32): with "
+                               "--compile ~1.25x faster rollouts on CPUs with bfloat16 units (AVX512-BF16, AMX), "
+                               "slower on others (a warning says so)")
     options.add_quiet(rollouts)
     rollouts.set_defaults(func=run_rollouts)
 

@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, TypeVar
 import torch
 
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
+from hyperbones.devices import cpu_has_bfloat16
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.surface import found_points
@@ -44,14 +45,6 @@ from hyperbones.runtime.stage_clock import NO_CLOCK
 if TYPE_CHECKING:
     from hyperbones.body.anny_body import Body
     from hyperbones.garment.garment import Garment
-
-
-def _cpu_has_bfloat16() -> bool:
-    """Whether oneDNN runs bfloat16 natively on this CPU (AVX512-BF16 or AMX); False if unknown."""
-    try:
-        return bool(torch.ops.mkldnn._is_mkldnn_bf16_supported())
-    except (AttributeError, RuntimeError):
-        return False
 
 
 def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Tensor:
@@ -223,7 +216,7 @@ class Simulator:
         if len(resolutions) > 1:
             raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
         self.device = torch.device(device)
-        if config.bfloat16 and self.device.type == "cpu" and not _cpu_has_bfloat16():
+        if config.bfloat16 and self.device.type == "cpu" and not cpu_has_bfloat16():
             warnings.warn("the runtime's Conv-MLP runs in bfloat16, which this CPU lacks units for: it is slower "
                           "than float32 here (--runtime bfloat16=false)", stacklevel=2)
         self.module_a = module_a.for_inference(self.device, config.bfloat16)

@@ -16,6 +16,7 @@ new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,10 +25,11 @@ import torch
 
 from hyperbones.body.anny_body import PosedBody
 from hyperbones.body.shape import BodyShape
+from hyperbones.devices import cpu_has_bfloat16
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.search import signed_distances_along
 from hyperbones.io_utils import atomic_path, load_versioned
-from hyperbones.models.teacher import Teacher
+from hyperbones.models.teacher import Autocast, Teacher
 from hyperbones.physics.material import Material
 from hyperbones.physics.metrics import detached_pct
 from hyperbones.runtime.identity import IdentityGeometry
@@ -283,11 +285,12 @@ def bank_files(folder: str | Path) -> list[Path]:
 
 
 def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor,
-                 root: torch.Tensor, positions: torch.Tensor) -> Path:
+                 root: torch.Tensor, positions: torch.Tensor, network_dtype: str = "float32") -> Path:
     """Write one rollout compactly (atomically): what rebuilds its identity (template,
     resolution, body shape, fabric, whether it was draped), the clip window and C's garment
     in half precision (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed
-    again on loading."""
+    again on loading. network_dtype: the precision C's network ran in (a record of how the
+    rollout was made; banks from before it are float32)."""
     if identity.resolution is None:
         raise ParameterError("only an identity sampled by TeacherData (with its template resolution) can be saved")
     path = Path(path)
@@ -295,7 +298,8 @@ def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint
         torch.save({"version": BANK_VERSION, "template": identity.name, "resolution": identity.resolution,
                     "shape": identity.body.shape.as_dict(), "material": identity.garment.material.as_dict(),
                     "draped": identity.draped, "motion": motion, "joint_rotations": joint_rotations.float(),
-                    "root_translation": root.float(), "positions": positions.half()}, tmp)
+                    "root_translation": root.float(), "positions": positions.half(),
+                    "network_dtype": network_dtype}, tmp)
     return path
 
 
@@ -305,13 +309,18 @@ def load_rollout(path: str | Path) -> dict:
 
 
 def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progress: bool = True,
-                  compile_teacher: bool = False) -> list[Path]:
+                  compile_teacher: bool = False, bfloat16: bool = False) -> list[Path]:
     """Simulate ``count`` drift- and detachment-checked rollouts of the config's teacher
     (``train.init_from``) into ``folder`` as ``rollout-s<seed>-<index>.pt``. Run again with the
     same seed, it goes on after the files already there (with fresh draws), so several
     processes with different seeds (and data settings, such as ``data.drape``), or one
     process over several sessions, fill one bank. compile_teacher: run the teacher's network
-    through ``compiled_for_inference`` (a long bank on the CPU: ~1.2-1.35x its speed there)."""
+    through ``compiled_for_inference`` (a long bank on the CPU: ~1.2-1.35x its speed there).
+    bfloat16: run the teacher's network under ``Autocast`` (its inputs, the integration, the
+    contact and the strain limiting stay float32), as the GPU job's rollouts do with
+    ``train.bfloat16``: faster where the processor has bfloat16 units, and its rollouts differ
+    from float32's no more than two float32 rollouts differ after rounding changes
+    (docs/experiments/2026-11-30-bfloat16-bank.md)."""
     from tqdm import tqdm
 
     from hyperbones.models.loading import teacher_from_checkpoint
@@ -324,6 +333,11 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     folder = Path(folder)
     first = len(list(folder.glob(f"rollout-s{seed}-*.pt"))) if folder.exists() else 0
     teacher, _ = teacher_from_checkpoint(config.train.init_from)
+    if bfloat16:
+        if not cpu_has_bfloat16():
+            warnings.warn("--bfloat16: this CPU lacks bfloat16 units, so the teacher runs slower than in float32 "
+                          "here", stacklevel=2)
+        teacher = Autocast(teacher)
     if compile_teacher:
         teacher = compiled_for_inference(teacher)
     data = TeacherData(config.data, seed=seed * 1_000_003 + first,
@@ -336,7 +350,8 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
         for index in tqdm(range(first, first + count), desc="rollouts", disable=not progress, unit="rollout"):
             draw = cache.simulate(teacher)
             written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", draw.identity, draw.motion,
-                                        draw.joint_rotations, draw.root, draw.positions))
+                                        draw.joint_rotations, draw.root, draw.positions,
+                                        "bfloat16" if bfloat16 else "float32"))
     if progress:
         print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} redrawn for drift)")
     return written
