@@ -20,7 +20,8 @@ from hyperbones.physics.metrics import area_error_pct, collision_pct, edge_error
 from hyperbones.runtime.teacher_method import TeacherMethod
 from hyperbones.training.config import load_config
 from hyperbones.training.data import TeacherData
-from hyperbones.training.rollouts import RolloutCache, compiled_for_inference, drift, signed_distances_from_start
+from hyperbones.training.rollouts import (compiled_for_inference, detached_above_hips, drift,
+                                          signed_distances_from_start)
 
 torch.set_num_threads(1)
 
@@ -34,8 +35,7 @@ for variant in variants:
     network = Autocast(base) if variant.startswith("bf16") else base
     models[variant] = compiled_for_inference(network) if variant.endswith("c") else network
 data = TeacherData(config.data, seed=seed)
-cache = RolloutCache(data, config.joint, config.runtime.num_bones, config.runtime.uv_resolution, torch.device("cpu"),
-                     config.data.settle_dt)
+search = None  # Warp's body search, made for the first body (every Anny body has the same faces)
 with torch.no_grad():
     for draw in range(draws):
         identity = data.sample_identity()
@@ -49,11 +49,12 @@ with torch.no_grad():
                                    settle_dt=config.data.settle_dt, device="cpu")
             start = time.perf_counter(); positions = method.run(posed); seconds = time.perf_counter() - start
             rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
-            if cache._search is None:
-                cache._search = BodyProximity(identity.body.faces)
-            distances, _ = signed_distances_from_start(cache._search, positions, posed.vertices, garment.vertices,
-                                                       identity.body.rest_vertices)
-            detached = cache.detachment(identity, positions, posed.vertices)
+            search = search or BodyProximity(identity.body.faces)
+            distances, start_distances = signed_distances_from_start(search, positions, posed.vertices,
+                                                                     garment.vertices, identity.body.rest_vertices)
+            # as RolloutCache.detachment, from the distances already measured
+            detached = detached_above_hips(distances, start_distances, garment.vertices,
+                                           float(identity.body.rest_joint_positions[0, 2]))
             row = dict(draw=draw, variant=variant, name=identity.name, V=positions.shape[1], T=positions.shape[0],
                        seconds=round(seconds, 2), eps_e=float(edge_error_pct(positions, identity.rest)),
                        eps_a=float(area_error_pct(positions, identity.rest)),

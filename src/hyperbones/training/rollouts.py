@@ -333,6 +333,7 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     folder = Path(folder)
     first = len(list(folder.glob(f"rollout-s{seed}-*.pt"))) if folder.exists() else 0
     teacher, _ = teacher_from_checkpoint(config.train.init_from)
+    network_dtype = "bfloat16" if bfloat16 else "float32"
     if bfloat16:
         if not cpu_has_bfloat16():
             warnings.warn("--bfloat16: this CPU lacks bfloat16 units, so the teacher runs slower than in float32 "
@@ -350,8 +351,7 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
         for index in tqdm(range(first, first + count), desc="rollouts", disable=not progress, unit="rollout"):
             draw = cache.simulate(teacher)
             written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", draw.identity, draw.motion,
-                                        draw.joint_rotations, draw.root, draw.positions,
-                                        "bfloat16" if bfloat16 else "float32"))
+                                        draw.joint_rotations, draw.root, draw.positions, network_dtype))
     if progress:
         print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} redrawn for drift)")
     return written
