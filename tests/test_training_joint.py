@@ -167,7 +167,7 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
 def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, capsys):
     """hyperbones rollouts fills a bank; the same seed goes on with new draws; phase 2 loads from it."""
     from hyperbones.cli import main
-    from hyperbones.training.rollouts import bank_files, generate_bank, load_rollout
+    from hyperbones.training.rollouts import DRAW_LOG, bank_files, generate_bank, load_rollout, read_draw_log
 
     teacher_run = tmp_path / "teacher"
     phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=1)
@@ -185,6 +185,20 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert records[0]["positions"].dtype == torch.float16 and records[0]["version"] == 1
     assert records[0]["network_dtype"] == "float32"
     assert len({(r["shape"]["weight"], r["motion"]) for r in records}) == 3  # three different draws
+    # Every draw is logged (refused ones too), each saved one under its file's name, with its cost.
+    draws = read_draw_log(bank / DRAW_LOG)
+    assert [d["file"] for d in draws if d["file"]] == [f.name for f in files]
+    assert all(d["refused_for"] for d in draws if d["file"] is None)  # only refused draws are not saved
+    assert all(d["rollout_s"] > 0 and d["identity_s"] >= 0 and d["frames"] > 2 for d in draws)
+    assert [(d["template"], d["motion"]) for d in draws if d["file"]] == [
+        (r["template"], r["motion"]) for r in records]
+    with open(bank / DRAW_LOG, "a") as log:
+        log.write('{"seed": 3, "ind')  # a process stopped mid-line
+    assert read_draw_log(bank / DRAW_LOG) == draws
+    with open(bank / DRAW_LOG, "a") as log:
+        log.write("\n{}\n")
+    with pytest.raises(InputFileError, match="line .* is not a JSON record"):
+        read_draw_log(bank / DRAW_LOG)
 
     trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=1)
     rollout = trainer.cache.load(files[0])

@@ -16,7 +16,10 @@ new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
 
 from __future__ import annotations
 
+import json
+import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -87,6 +90,8 @@ class SimulatedRollout:
     rise: float
     gap: float
     detached: float = 0.0  # % of vertex-frames come off the body (``detachment``)
+    identity_seconds: float = 0.0  # wall time drawing the identity (its drape included, when draped)
+    rollout_seconds: float = 0.0  # wall time of C's rollout and its checks
 
 
 def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]:
@@ -121,10 +126,17 @@ def detached_above_hips(distances: torch.Tensor, reference: torch.Tensor, start:
     return detached_pct(distances[:, upper], reference[upper]) if bool(upper.any()) else 0.0
 
 
+def refusal_reasons(config: JointConfig, rise: float, gap: float, detached: float) -> list[str]:
+    """The config's checks a rollout with this ``drift`` and ``detached`` share (%) fails: any of
+    "rise", "gap", "detached" (none: it passes)."""
+    return [name for name, value, limit in (("rise", rise, config.max_rise), ("gap", gap, config.max_gap),
+                                            ("detached", detached, config.max_detached_pct))
+            if limit > 0 and value > limit]
+
+
 def refused(config: JointConfig, rise: float, gap: float, detached: float) -> bool:
     """Whether a rollout with this ``drift`` and ``detached`` share (%) fails the config's checks."""
-    return ((config.max_rise > 0 and rise > config.max_rise) or (config.max_gap > 0 and gap > config.max_gap)
-            or (config.max_detached_pct > 0 and detached > config.max_detached_pct))
+    return bool(refusal_reasons(config, rise, gap, detached))
 
 
 class RolloutCache:
@@ -145,16 +157,22 @@ class RolloutCache:
         self.file_detachment: dict[str, float] = {}  # bank file -> its ``detachment``, measured once
         self._search = None  # Warp's body search for ``detachment``, made on first use
 
-    def simulate(self, teacher: Teacher) -> SimulatedRollout:
+    def simulate(self, teacher: Teacher,
+                 on_draw: Callable[[SimulatedRollout], None] | None = None) -> SimulatedRollout:
         """C over a random clip window on a random identity, redrawn while its ``drift`` or
         ``detachment`` fails the config's checks (the last of ``MAX_DRAWS`` draws is kept
-        whatever it is)."""
-        for _ in range(MAX_DRAWS - 1):
+        whatever it is). ``on_draw`` sees every draw, refused ones included, as it is made."""
+        def draw_once() -> SimulatedRollout:
             draw = self._draw(teacher)
-            if not refused(self.config, draw.rise, draw.gap, draw.detached):
-                return draw
+            if on_draw is not None:
+                on_draw(draw)
+            return draw
+
+        draw, draws = draw_once(), 1
+        while draws < MAX_DRAWS and refused(self.config, draw.rise, draw.gap, draw.detached):
             self.refused += 1
-        return self._draw(teacher)
+            draw, draws = draw_once(), draws + 1
+        return draw
 
     @property
     def refused_files(self) -> set[str]:
@@ -189,7 +207,9 @@ class RolloutCache:
         from hyperbones.runtime.teacher_method import TeacherMethod  # Warp's search and Anny's body
 
         data = self.data
+        started = time.perf_counter()
         identity = data.sample_identity()
+        drawn = time.perf_counter()
         at_end = data.random.random() < self.config.end_fraction
         window, root = data.sample_window(self.config.rollout_frames, identity, at_end=at_end)
         posed = identity.body.pose(window.joint_rotations, root)
@@ -203,8 +223,9 @@ class RolloutCache:
         finally:
             teacher.train(was_training)
         rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
+        detached = self.detachment(identity, positions, posed.vertices)
         return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap,
-                                self.detachment(identity, positions, posed.vertices))
+                                detached, drawn - started, time.perf_counter() - drawn)
 
     def assemble(self, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor, root: torch.Tensor,
                  positions: torch.Tensor, step: int = 0, posed: PosedBody | None = None,
@@ -349,12 +370,55 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
     written = []
     with torch.no_grad():
         for index in tqdm(range(first, first + count), desc="rollouts", disable=not progress, unit="rollout"):
-            draw = cache.simulate(teacher)
-            written.append(save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", draw.identity, draw.motion,
-                                        draw.joint_rotations, draw.root, draw.positions, network_dtype))
-    if progress:
-        print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} redrawn for drift)")
+            draws: list[SimulatedRollout] = []
+            kept = cache.simulate(teacher, on_draw=draws.append)
+            path = save_rollout(folder / f"rollout-s{seed}-{index:05d}.pt", kept.identity, kept.motion,
+                                kept.joint_rotations, kept.root, kept.positions, network_dtype)
+            written.append(path)
+            log_draws(folder / DRAW_LOG, [draw_record(draw, config.joint, seed, index, network_dtype,
+                                                      path.name if draw is kept else None) for draw in draws])
+    print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} draws refused for drift or detachment; "
+          f"every draw is listed in {DRAW_LOG} there)")
     return written
+
+
+DRAW_LOG = "draws.jsonl"  # a bank's record of every draw ``generate_bank`` made, one JSON object a line
+
+
+def draw_record(draw: SimulatedRollout, config: JointConfig, seed: int, index: int, network_dtype: str,
+                file: str | None) -> dict:
+    """One line of a bank's draw log: what was drawn, its checks (``refused_for``: the ones it
+    failed), its cost (s), and the file it was saved as (None: not saved). A draw that failed
+    is still saved when it was the last of ``MAX_DRAWS``."""
+    identity = draw.identity
+    return {"seed": seed, "index": index, "file": file, "template": identity.name, "vertices": identity.resolution,
+            "draped": identity.draped, "motion": draw.motion, "frames": int(draw.positions.shape[0]),
+            "rise_m": round(draw.rise, 5), "gap_m": round(draw.gap, 5), "detached_pct": round(draw.detached, 3),
+            "refused_for": refusal_reasons(config, draw.rise, draw.gap, draw.detached),
+            "identity_s": round(draw.identity_seconds, 2), "rollout_s": round(draw.rollout_seconds, 2),
+            "network_dtype": network_dtype, "made": time.strftime("%Y-%m-%dT%H:%M:%S")}
+
+
+def log_draws(path: Path, records: list[dict]) -> None:
+    """Append ``records`` to a draw log in one write (a process stopped mid-write leaves at most
+    its last line cut short, which ``read_draw_log`` skips)."""
+    with open(path, "a", encoding="utf-8") as log:
+        log.write("".join(json.dumps(record) + "\n" for record in records))
+
+
+def read_draw_log(path: str | Path) -> list[dict]:
+    """The records of a bank's draw log (``log_draws``); a last line cut short is left out, any
+    other line that is not JSON is an error."""
+    path = Path(path)
+    lines = path.read_text(encoding="utf-8").splitlines()
+    records = []
+    for number, line in enumerate(lines, start=1):
+        try:
+            records.append(json.loads(line))
+        except json.JSONDecodeError:
+            if number < len(lines):
+                raise InputFileError(path, f"line {number} is not a JSON record") from None
+    return records
 
 
 def compiled_for_inference(teacher: Teacher) -> Teacher:
