@@ -46,7 +46,9 @@ def evaluate(name: str, out: Path, checkpoint: str | None) -> list[dict]:
         command += ["--checkpoint", checkpoint] if checkpoint else []
         command += ["--runtime", settings] if settings else []
         print(f"{name}: {' '.join(command[1:])}", flush=True)
-        subprocess.run(command, check=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        (out / name).mkdir(parents=True, exist_ok=True)
+        with open(out / name / "eval.log", "w") as log:  # the eval's own table, beside its report
+            subprocess.run(command, check=True, stdout=log, env={**os.environ, "OMP_NUM_THREADS": "1"})
     method = VARIANTS[name][0]
     return [run for run in json.loads(report.read_text()) if run["method"] == method]
 
