@@ -271,3 +271,17 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert main(["rollouts", "--config", str(joint_config), "--out", str(bank), "--templates", "dress,skirt"]) == 2
     assert "--templates skirt: not among the config's data.templates" in capsys.readouterr().err
 
+
+
+@pytest.mark.parametrize(("flags", "drape"), [([], True), (["--drape"], True), (["--no-drape"], False)])
+def test_rollouts_start_draped_or_carried_whatever_the_config_says(tmp_path, monkeypatch, flags, drape):
+    """hyperbones rollouts --drape/--no-drape overrides the config's data.drape; without either the config decides."""
+    from hyperbones.cli import main
+    from hyperbones.training import rollouts
+
+    config = tmp_path / "joint.toml"
+    config.write_text("[model]\nlatent = 16\n[joint]\n[data]\ndrape = true\n")
+    made = []
+    monkeypatch.setattr(rollouts, "generate_bank", lambda config, *args, **kwargs: made.append(config.data.drape))
+    assert main(["rollouts", "--config", str(config), "--out", str(tmp_path / "bank"), *flags]) == 0
+    assert made == [drape]

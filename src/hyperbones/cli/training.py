@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from dataclasses import replace
 from pathlib import Path
 
@@ -102,8 +103,8 @@ def run_rollouts(args) -> int:
             raise ParameterError(f"--templates {', '.join(unknown)}: not among the config's data.templates "
                                  f"({', '.join(config.data.templates)})")
         config = replace(config, data=replace(config.data, templates=templates))
-    if args.drape:
-        config = replace(config, data=replace(config.data, drape=True))
+    if args.drape is not None:
+        config = replace(config, data=replace(config.data, drape=args.drape))
     generate_bank(config, out, args.count, seed=args.seed, progress=not args.quiet, compile_teacher=args.compile,
                   bfloat16=args.bfloat16)
     return 0
@@ -122,9 +123,11 @@ def add_rollouts(sub) -> None:
     rollouts.add_argument("--templates", default=None,
                           help="comma list: draw only these of the config's garment templates (default: all), "
                                "to add rollouts of garments the model does worst on")
-    rollouts.add_argument("--drape", action="store_true",
-                          help="start every rollout from its garment draped on the body (data.drape), as simulate "
-                               "does; a bank may mix draped and carried starts, and training rebuilds each as it was")
+    rollouts.add_argument("--drape", action=argparse.BooleanOptionalAction, default=None,
+                          help="start every rollout from its garment draped on the body, as simulate does "
+                               "(--no-drape: from the garment carried to the body, whose drape is minutes of one "
+                               "core); default: the config's data.drape. A bank may mix draped and carried starts, "
+                               "and training rebuilds each as it was")
     rollouts.add_argument("--compile", action="store_true",
                           help="compile the teacher's network (torch.compile): ~1.2-1.35x faster rollouts on the CPU "
                                "after 10-30 s of compiling, for a long bank; needs a C++ compiler (gcc or clang)")
