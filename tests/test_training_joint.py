@@ -1,5 +1,7 @@
 """hyperbones train, phase 2: Modules A, B and C in one step, from a phase-1 run, on a tiny garment."""
 
+import json
+
 import pytest
 import torch
 
@@ -217,11 +219,25 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     # A draped share in the same bank (hyperbones rollouts --drape), made with the teacher in
     # bfloat16 (--bfloat16): the undraped run rebuilds it draped.
     [draped_file] = generate_bank(draping, bank, count=1, seed=4, progress=False, bfloat16=True)
-    assert load_rollout(draped_file)["draped"] is True
-    assert load_rollout(draped_file)["network_dtype"] == "bfloat16"
+    saved = load_rollout(draped_file)
+    assert saved["draped"] is True and saved["network_dtype"] == "bfloat16"
+    assert json.loads((bank / DRAW_LOG).read_text().splitlines()[-1])["identity_s"] > 0  # the drape took its time
     mixed = trainer.cache.load(draped_file)
     assert mixed.physics.draped is True
+    assert torch.equal(mixed.physics.garment.vertices, saved["start"])  # the saved start: nothing draped again
     assert not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
+    # A draped file from before starts were saved is draped again as it was then: from the carried
+    # garment (not from the default body's drape), which ends near the warm-started drape.
+    old_file = tmp_path / "old" / "rollout-s4-00000.pt"
+    old_file.parent.mkdir()
+    torch.save({key: value for key, value in saved.items() if key != "start"}, old_file)
+    cold = trainer.cache.load(old_file).physics.garment.vertices
+    apart = (cold - saved["start"]).norm(dim=-1)
+    assert 0 < float(apart.mean()) < 0.01 and cold[:, 2].mean() < mixed.physics.rest.rest_vertices[:, 2].mean()
+    bad = {**saved, "start": saved["start"][:-1]}
+    torch.save(bad, old_file)
+    with pytest.raises(InputFileError, match=r"rollout-s4-00000.pt: a draped start of \(\d+, 3\)"):
+        trainer.cache.load(old_file)
 
     # A rollout that came off the body is measured so, by Warp's search and by torch's alike,
     # and a bank file like it is skipped (refused) when the config checks detachment.

@@ -242,11 +242,17 @@ class RolloutCache:
 
     def load(self, path: str | Path, step: int = 0) -> TeacherRollout:
         """A rollout saved by ``save_rollout``, rebuilt on this config's garments as it started
-        (draped or carried, whatever ``data.drape`` says: a bank may hold both)."""
+        (draped or carried, whatever ``data.drape`` says: a bank may hold both). A draped one
+        starts from the garment saved with it; files from before that was saved (2026-11-30)
+        are draped again as they were then (from the carried garment; cached on disk)."""
         record = load_rollout(path)
         draped = record.get("draped", False)  # banks from before the flag are undraped
-        identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
-                                          Material(**record["material"]), drape=draped)
+        try:
+            identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
+                                              Material(**record["material"]), drape=draped, start=record.get("start"),
+                                              warm_drape=False)
+        except ParameterError as error:
+            raise InputFileError(path, str(error)) from None
         if identity.rest.rest_vertices.shape[0] != record["positions"].shape[1]:
             raise InputFileError(path, f"{record['positions'].shape[1]} garment vertices, but {record['template']} at "
                                        f"{record['resolution']} has {identity.rest.rest_vertices.shape[0]} here")
@@ -308,10 +314,11 @@ def bank_files(folder: str | Path) -> list[Path]:
 def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor,
                  root: torch.Tensor, positions: torch.Tensor, network_dtype: str = "float32") -> Path:
     """Write one rollout compactly (atomically): what rebuilds its identity (template,
-    resolution, body shape, fabric, whether it was draped), the clip window and C's garment
-    in half precision (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed
-    again on loading. network_dtype: the precision C's network ran in (a record of how the
-    rollout was made; banks from before it are float32)."""
+    resolution, body shape, fabric, whether it was draped, and the draped garment it started
+    from, so that loading it drapes nothing), the clip window and C's garment in half
+    precision (T,V,3): ~1.7 MB for 150 frames of 1550 vertices. The body is posed again on
+    loading. network_dtype: the precision C's network ran in (a record of how the rollout was
+    made; banks from before it are float32)."""
     if identity.resolution is None:
         raise ParameterError("only an identity sampled by TeacherData (with its template resolution) can be saved")
     path = Path(path)
@@ -320,6 +327,7 @@ def save_rollout(path: str | Path, identity: PhysicsIdentity, motion: str, joint
                     "shape": identity.body.shape.as_dict(), "material": identity.garment.material.as_dict(),
                     "draped": identity.draped, "motion": motion, "joint_rotations": joint_rotations.float(),
                     "root_translation": root.float(), "positions": positions.half(),
+                    "start": identity.garment.vertices.float() if identity.draped else None,
                     "network_dtype": network_dtype}, tmp)
     return path
 
@@ -377,7 +385,7 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
             written.append(path)
             log_draws(folder / DRAW_LOG, [draw_record(draw, config.joint, seed, index, network_dtype,
                                                       path.name if draw is kept else None) for draw in draws])
-    print(f"wrote {len(written)} rollouts to {folder} ({cache.refused} draws refused for drift or detachment; "
+    print(f"wrote {len(written)} rollout{'' if len(written) == 1 else 's'} to {folder} ({cache.refused} draws refused for drift or detachment; "
           f"every draw is listed in {DRAW_LOG} there)")
     return written
 
