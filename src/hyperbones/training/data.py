@@ -8,10 +8,7 @@ Expensive parts are done once per process and reused by every episode:
 Per episode a new body shape is cheap to make; the garment is carried onto it (that carried
 garment is its rest shape) and the clip's root path is scaled by the leg-length ratio.
 With ``data.drape`` the carried garment is also settled on the body (``draped_vertices``;
-seconds to minutes each, cached on disk), starting from the template's drape on the default
-body carried there the same way (made once per template): 1.7-3x fewer seconds than
-starting from the carried garment, which then has to slide and settle all the way
-(docs/experiments/2026-11-30-bank-draws-and-warm-drapes.md).
+seconds to minutes each, cached on disk).
 """
 
 from __future__ import annotations
@@ -36,7 +33,6 @@ from hyperbones.garment.templates import make_template
 from hyperbones.io_utils import atomic_path
 from hyperbones.motion.load import load_motion
 from hyperbones.motion.motion import Motion
-from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.material import Material
 from hyperbones.rig.garment_skinning import garment_skin_weights
 from hyperbones.training.config import DataConfig
@@ -71,30 +67,24 @@ def template_source(name: str, vertices: int, default_body: Body) -> GarmentSour
     return GarmentSource(garment, weights, ShapeFollower.bind(garment, default_body))
 
 
-def draped_vertices(garment: Garment, body: Body, resolution: int, start: torch.Tensor | None = None,
-                    prefix: str = "") -> torch.Tensor:
+def draped_vertices(garment: Garment, body: Body, resolution: int) -> torch.Tensor:
     """(V,3) ``garment`` (a template carried to ``body``, at ``resolution``) settled on the
     body's canonical pose by ``garment.drape``, its carried shape as rest shape; cached on
-    disk by template, resolution, body shape, fabric and whether it started warm.
+    disk by template, resolution, body shape and fabric.
 
-    start: (V,3) where the Newton solve begins (a warm start: the default body's drape carried
-    to ``body``); None: from the carried garment itself (how drapes were made before
-    2026-11-30, and how the bank files of then are rebuilt). prefix: of the cache file's name.
+    The solve starts from the carried garment. Starting it from the default body's drape
+    carried to ``body`` was 1.7-3.6x faster for shirts and the dress but stalled on the long
+    skirt and the trousers at 2,500 vertices (docs/experiments/2026-11-30-bank-draws-and-warm-drapes.md).
     """
     key = {"template": garment.name, "resolution": resolution, "body": body.shape.as_dict(),
            "material": garment.material.as_dict(), "templates": TEMPLATE_CACHE_VERSION, "drape": DRAPE_CACHE_VERSION}
-    if start is not None:
-        key["start"] = "default body's drape, carried"
     digest = hashlib.sha1(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
-    path = cache_dir() / "training-drapes" / f"{prefix}{garment.name}-{resolution}-{digest}.pt"
+    path = cache_dir() / "training-drapes" / f"{garment.name}-{resolution}-{digest}.pt"
     if path.exists():
         return torch.load(path, weights_only=True)
-    # Without a start the drape makes the pushed-out carried garment its rest shape; with one it
-    # is given the carried garment, the identity's physics rest shape either way.
-    rest = None if start is None else ClothRest.from_mesh(garment.vertices.double(), garment.faces, garment.material)
     with warnings.catch_warnings(), torch.enable_grad():  # the drape's Newton steps need gradients (rollouts run without)
         warnings.simplefilter("ignore")  # an unconverged drape is still a settled start; the rollout goes on from it
-        settled, _ = drape(garment if start is None else garment.with_vertices(start), body, rest=rest)
+        settled, _ = drape(garment, body)
     with atomic_path(path) as tmp:
         torch.save(settled.vertices, tmp)
     return settled.vertices
@@ -108,7 +98,6 @@ class TeacherData(EpisodeDraws):
         self.random = random.Random(seed)
         self.default_body = body_for(BodyShape())
         self.sources = {}
-        self.draped_followers: dict[tuple[str, int], ShapeFollower] = {}  # made on first use (``draped_follower``)
         for name in config.templates:
             for vertices in config.resolutions:
                 if progress:
@@ -136,14 +125,11 @@ class TeacherData(EpisodeDraws):
         return self.identity_for(name, vertices, self.sample_shape(), self.sample_material())
 
     def identity_for(self, name: str, vertices: int, shape: BodyShape, material: Material,
-                     drape: bool | None = None, start: torch.Tensor | None = None,
-                     warm_drape: bool = True) -> Identity:
+                     drape: bool | None = None, start: torch.Tensor | None = None) -> Identity:
         """Template ``name`` at resolution ``vertices`` (one of the config's) carried to the
         body of ``shape``, in ``material``, and draped there when ``drape`` (default: ``data.drape``).
 
         start: (V,3) the draped garment as a bank file saved it (then nothing is draped).
-        warm_drape: start the drape from the default body's drape carried to this body (False:
-        from the carried garment, as the draped bank files saved without ``start`` began).
         """
         drape = self.config.drape if drape is None else drape
         if (name, vertices) not in self.sources:
@@ -158,21 +144,9 @@ class TeacherData(EpisodeDraws):
                                      f"garment here is {tuple(rest_vertices.shape)}")
             garment, drape = garment.with_vertices(start.float()), True
         elif drape:
-            warm = self.draped_follower(name, vertices).place(body) if warm_drape else None
-            garment = garment.with_vertices(draped_vertices(garment, body, vertices, start=warm))
+            garment = garment.with_vertices(draped_vertices(garment, body, vertices))
         return Identity.build(name, body, rest_vertices, source.garment.faces, source.garment.pinned,
                               source.skin_weights, material, garment, vertices, drape)
-
-    def draped_follower(self, name: str, vertices: int) -> ShapeFollower:
-        """Carries the template ``name`` at ``vertices``, draped on the default body (in the
-        template's default fabric; the drape cached on disk), to other bodies: a warm start for
-        their drapes. Bound once per process."""
-        if (name, vertices) not in self.draped_followers:
-            source = self.sources[(name, vertices)]
-            settled = draped_vertices(source.garment, self.default_body, vertices, prefix="default-body-")
-            self.draped_followers[(name, vertices)] = ShapeFollower.bind(source.garment.with_vertices(settled),
-                                                                         self.default_body)
-        return self.draped_followers[(name, vertices)]
 
     def sample_episode(self, steps: int, identity: Identity | None = None) -> Episode:
         """An episode of ``steps`` dynamic steps on ``identity`` (a new random one when None)."""

@@ -244,13 +244,12 @@ class RolloutCache:
         """A rollout saved by ``save_rollout``, rebuilt on this config's garments as it started
         (draped or carried, whatever ``data.drape`` says: a bank may hold both). A draped one
         starts from the garment saved with it; files from before that was saved (2026-11-30)
-        are draped again as they were then (from the carried garment; cached on disk)."""
+        are draped again (cached on disk)."""
         record = load_rollout(path)
         draped = record.get("draped", False)  # banks from before the flag are undraped
         try:
             identity = self.data.identity_for(record["template"], record["resolution"], BodyShape(**record["shape"]),
-                                              Material(**record["material"]), drape=draped, start=record.get("start"),
-                                              warm_drape=False)
+                                              Material(**record["material"]), drape=draped, start=record.get("start"))
         except ParameterError as error:
             raise InputFileError(path, str(error)) from None
         if identity.rest.rest_vertices.shape[0] != record["positions"].shape[1]:
