@@ -26,7 +26,7 @@ VARIANTS = {  # name: (method, --runtime settings, what is off)
     "no-follow": ("hyperbones", "follow=1,loose_follow=1", "the follow"),
     "no-untangling": ("hyperbones", "untangle=false", "untangling"),
     "one-round": ("hyperbones", "contact_rounds=1", "the second contact round"),
-    "no-projection": ("hyperbones", "projection_iterations=0", "edge projection (push-out only)"),
+    "no-projection": ("hyperbones", "projection_iterations=0", "edge projection (push-out and proxy sweeps stay)"),
     "module-a-alone": ("hyperbones-raw", "", "everything after Module A"),
 }
 METRICS = (("edge_error_pct", "ε_e %", "{:.3f}"), ("area_error_pct", "ε_a %", "{:.3f}"),
