@@ -169,7 +169,8 @@ def test_joint_steps_with_a_frozen_teacher(tmp_path, body):
 def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, capsys):
     """hyperbones rollouts fills a bank; the same seed goes on with new draws; phase 2 loads from it."""
     from hyperbones.cli import main
-    from hyperbones.training.rollouts import DRAW_LOG, bank_files, generate_bank, load_rollout, read_draw_log
+    from hyperbones.training.rollouts import (DRAW_LOG, bank_files, generate_bank, load_rollout, log_draws,
+                                              read_draw_log)
 
     teacher_run = tmp_path / "teacher"
     phase_one = TeacherTrainer(TeacherTrainingConfig.from_dict(TINY), teacher_run, progress=False, max_steps=1)
@@ -197,7 +198,10 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     with open(bank / DRAW_LOG, "a") as log:
         log.write('{"seed": 3, "ind')  # a process stopped mid-line
     assert read_draw_log(bank / DRAW_LOG) == draws
+    log_draws(bank / DRAW_LOG, [{"index": 9}])  # the next process drops the cut line first
+    assert read_draw_log(bank / DRAW_LOG) == [*draws, {"index": 9}]
     with open(bank / DRAW_LOG, "a") as log:
+        log.write('{"seed": 3, "ind')
         log.write("\n{}\n")
     with pytest.raises(InputFileError, match="line .* is not a JSON record"):
         read_draw_log(bank / DRAW_LOG)

@@ -17,6 +17,7 @@ new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
 from __future__ import annotations
 
 import json
+import os
 import time
 import warnings
 from collections.abc import Callable
@@ -384,8 +385,8 @@ def generate_bank(config, folder: str | Path, count: int, seed: int = 0, progres
             written.append(path)
             log_draws(folder / DRAW_LOG, [draw_record(draw, config.joint, seed, index, network_dtype,
                                                       path.name if draw is kept else None) for draw in draws])
-    print(f"wrote {len(written)} rollout{'' if len(written) == 1 else 's'} to {folder} ({cache.refused} draws refused for drift or detachment; "
-          f"every draw is listed in {DRAW_LOG} there)")
+    print(f"wrote {len(written)} rollout{'' if len(written) == 1 else 's'} to {folder} ({cache.refused} draws "
+          f"refused for drift or detachment; every draw is listed in {DRAW_LOG} there)")
     return written
 
 
@@ -407,10 +408,17 @@ def draw_record(draw: SimulatedRollout, config: JointConfig, seed: int, index: i
 
 
 def log_draws(path: Path, records: list[dict]) -> None:
-    """Append ``records`` to a draw log in one write (a process stopped mid-write leaves at most
-    its last line cut short, which ``read_draw_log`` skips)."""
-    with open(path, "a", encoding="utf-8") as log:
-        log.write("".join(json.dumps(record) + "\n" for record in records))
+    """Append ``records`` to a draw log in one write. A process stopped mid-write leaves at most
+    its last line cut short: ``read_draw_log`` skips it, and the next append drops it first."""
+    text = "".join(json.dumps(record) + "\n" for record in records).encode("utf-8")
+    with open(path, "ab+") as log:
+        end = log.seek(0, os.SEEK_END)
+        if end:
+            log.seek(end - 1)
+            if log.read(1) != b"\n":
+                log.seek(0)
+                log.truncate(log.read().rfind(b"\n") + 1)
+        log.write(text)
 
 
 def read_draw_log(path: str | Path) -> list[dict]:
