@@ -12,6 +12,7 @@ import argparse
 import statistics
 from collections import defaultdict
 
+from hyperbones.errors import HyperbonesError
 from hyperbones.training.rollouts import DRAW_LOG, read_draw_log
 
 
@@ -20,7 +21,10 @@ def main() -> None:
     parser.add_argument("bank", help="bank folder (holds draws.jsonl)")
     parser.add_argument("--since", default="", help="only draws made at or after this ISO time")
     args = parser.parse_args()
-    draws = [d for d in read_draw_log(f"{args.bank}/{DRAW_LOG}") if d["made"] >= args.since]
+    try:
+        draws = [d for d in read_draw_log(f"{args.bank}/{DRAW_LOG}") if d["made"] >= args.since]
+    except HyperbonesError as error:
+        raise SystemExit(f"error: {error}") from None
     if not draws:
         raise SystemExit(f"{args.bank}/{DRAW_LOG}: no draws logged{' since ' + args.since if args.since else ''}")
     groups: dict[tuple[str, bool], list[dict]] = defaultdict(list)

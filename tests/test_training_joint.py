@@ -205,6 +205,8 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
         log.write("\n{}\n")
     with pytest.raises(InputFileError, match="line .* is not a JSON record"):
         read_draw_log(bank / DRAW_LOG)
+    with pytest.raises(InputFileError, match="draws.jsonl: no draw log"):
+        read_draw_log(tmp_path / "no-bank" / DRAW_LOG)
 
     trainer = JointTrainer(config, tmp_path / "joint", progress=False, max_steps=1)
     rollout = trainer.cache.load(files[0])

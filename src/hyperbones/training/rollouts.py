@@ -425,6 +425,8 @@ def read_draw_log(path: str | Path) -> list[dict]:
     """The records of a bank's draw log (``log_draws``); a last line cut short is left out, any
     other line that is not JSON is an error."""
     path = Path(path)
+    if not path.exists():
+        raise InputFileError(path, "no draw log (hyperbones rollouts writes one into its bank since 2026-11-30)")
     lines = path.read_text(encoding="utf-8").splitlines()
     records = []
     for number, line in enumerate(lines, start=1):
