@@ -3,7 +3,8 @@
 Prints one Markdown row per garment template and start (draped or carried): draws made, the
 share refused (for rise, gap or detachment), files saved, and the median seconds of one draw
 spent on its identity (the drape included) and on its rollout; then the bank's whole hours per
-saved file. Usage: ``python scripts/bank_draws.py BANK [--since YYYY-MM-DDTHH:MM]``.
+saved file (CPU seconds where the log has them, else wall seconds).
+Usage: ``python scripts/bank_draws.py BANK [--since YYYY-MM-DDTHH:MM]``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,11 @@ def main() -> None:
         raise SystemExit(f"error: {error}") from None
     if not draws:
         raise SystemExit(f"{args.bank}/{DRAW_LOG}: no draws logged{' since ' + args.since if args.since else ''}")
+    # CPU seconds (one core's work, blind to other jobs and to a paused process) where every draw
+    # has them (logs from 2026-11-30 04:20 on), wall seconds otherwise.
+    cpu = all("rollout_cpu_s" in d for d in draws)
+    identity_key, rollout_key = ("identity_cpu_s", "rollout_cpu_s") if cpu else ("identity_s", "rollout_s")
+    print(f"seconds: {'CPU time of the bank process' if cpu else 'wall time (older records have no CPU time)'}\n")
     groups: dict[tuple[str, bool], list[dict]] = defaultdict(list)
     for draw in draws:
         groups[(draw["template"], draw["draped"])].append(draw)
@@ -36,17 +42,18 @@ def main() -> None:
         refused = sum(bool(d["refused_for"]) for d in group)
         print(f"| {template} | {'draped' if draped else 'carried'} | {len(group)} | {100 * refused / len(group):.0f} "
               f"| {sum(d['file'] is not None for d in group)} "
-              f"| {statistics.median(d['identity_s'] for d in group):.1f} "
-              f"| {statistics.median(d['rollout_s'] for d in group):.1f} |")
-    seconds = sum(d["identity_s"] + d["rollout_s"] for d in draws)
+              f"| {statistics.median(d[identity_key] for d in group):.1f} "
+              f"| {statistics.median(d[rollout_key] for d in group):.1f} |")
+    seconds = sum(d[identity_key] + d[rollout_key] for d in draws)
     saved = sum(d["file"] is not None for d in draws)
     refused = [d for d in draws if d["refused_for"]]
+    wasted = sum(d[identity_key] + d[rollout_key] for d in refused)
     reasons = ", ".join(f"{reason} {sum(reason in d['refused_for'] for d in refused)}"
                         for reason in ("rise", "gap", "detached"))
     print(f"\n{len(draws)} draws, {saved} saved; {len(refused)} refused (for {reasons}); "
           f"{seconds / 3600:.2f} core-hours in draws, {seconds / max(saved, 1):.0f} s per saved rollout "
-          f"({sum(d['identity_s'] + d['rollout_s'] for d in refused) / max(seconds, 1) * 100:.0f} % of it on refused draws, "
-          f"{sum(d['identity_s'] for d in draws) / max(seconds, 1) * 100:.0f} % on identities and drapes)")
+          f"({wasted / max(seconds, 1) * 100:.0f} % of it on refused draws, "
+          f"{sum(d[identity_key] for d in draws) / max(seconds, 1) * 100:.0f} % on identities and drapes)")
 
 
 if __name__ == "__main__":

@@ -192,7 +192,8 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     draws = read_draw_log(bank / DRAW_LOG)
     assert [d["file"] for d in draws if d["file"]] == [f.name for f in files]
     assert all(d["refused_for"] for d in draws if d["file"] is None)  # only refused draws are not saved
-    assert all(d["rollout_s"] > 0 and d["identity_s"] >= 0 and d["frames"] > 2 for d in draws)
+    assert all(d["rollout_s"] > 0 and d["rollout_cpu_s"] > 0 and d["identity_s"] >= 0 and d["frames"] > 2
+               for d in draws)
     assert [(d["template"], d["motion"]) for d in draws if d["file"]] == [
         (r["template"], r["motion"]) for r in records]
     with open(bank / DRAW_LOG, "a") as log:
@@ -289,7 +290,6 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     joint_config.write_text("[model]\nlatent = 16\n[joint]\n")
     assert main(["rollouts", "--config", str(joint_config), "--out", str(bank), "--templates", "dress,skirt"]) == 2
     assert "--templates skirt: not among the config's data.templates" in capsys.readouterr().err
-
 
 
 @pytest.mark.parametrize(("flags", "drape"), [([], True), (["--drape"], True), (["--no-drape"], False)])

@@ -93,6 +93,8 @@ class SimulatedRollout:
     detached: float = 0.0  # % of vertex-frames come off the body (``detachment``)
     identity_seconds: float = 0.0  # wall time drawing the identity (its drape included, when draped)
     rollout_seconds: float = 0.0  # wall time of C's rollout and its checks
+    identity_cpu_seconds: float = 0.0  # the same in this process's CPU time (blind to other jobs and pauses)
+    rollout_cpu_seconds: float = 0.0
 
 
 def drift(positions: torch.Tensor, skinned: torch.Tensor) -> tuple[float, float]:
@@ -208,9 +210,9 @@ class RolloutCache:
         from hyperbones.runtime.teacher_method import TeacherMethod  # Warp's search and Anny's body
 
         data = self.data
-        started = time.perf_counter()
+        started, started_cpu = time.perf_counter(), time.process_time()
         identity = data.sample_identity()
-        drawn = time.perf_counter()
+        drawn, drawn_cpu = time.perf_counter(), time.process_time()
         at_end = data.random.random() < self.config.end_fraction
         window, root = data.sample_window(self.config.rollout_frames, identity, at_end=at_end)
         posed = identity.body.pose(window.joint_rotations, root)
@@ -226,7 +228,8 @@ class RolloutCache:
         rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
         detached = self.detachment(identity, positions, posed.vertices)
         return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap,
-                                detached, drawn - started, time.perf_counter() - drawn)
+                                detached, drawn - started, time.perf_counter() - drawn, drawn_cpu - started_cpu,
+                                time.process_time() - drawn_cpu)
 
     def assemble(self, identity: PhysicsIdentity, motion: str, joint_rotations: torch.Tensor, root: torch.Tensor,
                  positions: torch.Tensor, step: int = 0, posed: PosedBody | None = None,
@@ -396,7 +399,8 @@ DRAW_LOG = "draws.jsonl"  # a bank's record of every draw ``generate_bank`` made
 def draw_record(draw: SimulatedRollout, config: JointConfig, seed: int, index: int, network_dtype: str,
                 file: str | None) -> dict:
     """One line of a bank's draw log: what was drawn, its checks (``refused_for``: the ones it
-    failed), its cost (s), and the file it was saved as (None: not saved). A draw that failed
+    failed), its cost (s, wall and this process's CPU time), and the file it was saved as (None:
+    not saved). A draw that failed
     is still saved when it was the last of ``MAX_DRAWS``."""
     identity = draw.identity
     return {"seed": seed, "index": index, "file": file, "template": identity.name, "vertices": identity.resolution,
@@ -404,6 +408,7 @@ def draw_record(draw: SimulatedRollout, config: JointConfig, seed: int, index: i
             "rise_m": round(draw.rise, 5), "gap_m": round(draw.gap, 5), "detached_pct": round(draw.detached, 3),
             "refused_for": refusal_reasons(config, draw.rise, draw.gap, draw.detached),
             "identity_s": round(draw.identity_seconds, 2), "rollout_s": round(draw.rollout_seconds, 2),
+            "identity_cpu_s": round(draw.identity_cpu_seconds, 2), "rollout_cpu_s": round(draw.rollout_cpu_seconds, 2),
             "network_dtype": network_dtype, "made": time.strftime("%Y-%m-%dT%H:%M:%S")}
 
 
