@@ -48,7 +48,10 @@ def evaluate(name: str, out: Path, checkpoint: str | None) -> list[dict]:
         print(f"{name}: {' '.join(command[1:])}", flush=True)
         (out / name).mkdir(parents=True, exist_ok=True)
         with open(out / name / "eval.log", "w") as log:  # the eval's own table, beside its report
-            subprocess.run(command, check=True, stdout=log, env={**os.environ, "OMP_NUM_THREADS": "1"})
+            done = subprocess.run(command, stdout=log, env={**os.environ, "OMP_NUM_THREADS": "1"})
+        if done.returncode:
+            raise SystemExit(f"error: {name}: hyperbones eval exited {done.returncode} "
+                             f"(its output: {out / name}/eval.log)")
     method = VARIANTS[name][0]
     return [run for run in json.loads(report.read_text()) if run["method"] == method]
 

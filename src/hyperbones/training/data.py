@@ -73,7 +73,7 @@ def draped_vertices(garment: Garment, body: Body, resolution: int) -> torch.Tens
     disk by template, resolution, body shape and fabric.
 
     The solve starts from the carried garment. Starting it from the default body's drape
-    carried to ``body`` was 1.7-3.6x faster for shirts and the dress but stalled on the long
+    carried to ``body`` was 1.7-3.6x faster for shirts and dresses but stalled on the long
     skirt and the trousers at 2,500 vertices (docs/experiments/2026-11-30-bank-draws-and-warm-drapes.md).
     """
     key = {"template": garment.name, "resolution": resolution, "body": body.shape.as_dict(),
