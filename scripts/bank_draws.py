@@ -29,7 +29,7 @@ def main() -> None:
     if not draws:
         raise SystemExit(f"{args.bank}/{DRAW_LOG}: no draws logged{' since ' + args.since if args.since else ''}")
     # CPU seconds (one core's work, blind to other jobs and to a paused process) where every draw
-    # has them (logs from 2026-11-30 04:20 on), wall seconds otherwise.
+    # has them (records made since commit 61a6d16), wall seconds otherwise.
     cpu = all("rollout_cpu_s" in d for d in draws)
     identity_key, rollout_key = ("identity_cpu_s", "rollout_cpu_s") if cpu else ("identity_s", "rollout_s")
     print(f"seconds: {'CPU time of the bank process' if cpu else 'wall time (older records have no CPU time)'}\n")
