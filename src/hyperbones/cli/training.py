@@ -125,8 +125,8 @@ def add_rollouts(sub) -> None:
                                "to add rollouts of garments the model does worst on")
     rollouts.add_argument("--drape", action=argparse.BooleanOptionalAction, default=None,
                           help="start every rollout from its garment draped on the body, as simulate does "
-                               "(--no-drape: from the garment carried to the body, whose drape is minutes of one "
-                               "core); default: the config's data.drape. A bank may mix draped and carried starts, "
+                               "(--no-drape: from the garment carried to the body, skipping the drape's 15 s to 2.5 min "
+                               "of one core); default: the config's data.drape. A bank may mix draped and carried starts, "
                                "and training rebuilds each as it was")
     rollouts.add_argument("--compile", action="store_true",
                           help="compile the teacher's network (torch.compile): ~1.2-1.35x faster rollouts on the CPU "
