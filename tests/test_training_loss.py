@@ -11,7 +11,7 @@ from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.energies import COLLISION_EPSILON
 from hyperbones.physics.material import Material
 from hyperbones.training.config import JointConfig
-from hyperbones.training.loss import runtime_terms
+from hyperbones.training.loss import edge_length_error, runtime_terms
 
 # Round numbers, so the energies below can be written out: E_stretch = A h (μ tr G² + ½λ (tr G)²),
 # E_bend = k_b l² / (4 (A1 + A2)) · θ² / 2.
@@ -81,6 +81,31 @@ def test_position_scale_and_a_shifted_garment():
         assert float(terms["a_mse"]) == pytest.approx(expected, rel=1e-9)
         assert float(terms["a_laplacian"]) == pytest.approx(0.0, abs=1e-20)
         assert float(terms["a_interpenetration"]) == 0.0
+
+
+def test_edge_length_term_by_hand():
+    """L_edge: frame 0 has vertex 1 of A 1 cm further along x than C's (edge 0-1 1 cm longer,
+    edge 1-2 longer by sqrt(1.0001) − 1); frame 1 is C's square turned and moved, so its edges
+    match C's exactly while its MSE is large. The mean over frames of each frame's edge mean."""
+    turn = torch.tensor([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], dtype=torch.float64)
+    target = torch.cat([SQUARE, SQUARE + 5.0])
+    positions = torch.cat([SQUARE, SQUARE @ turn.T + 7.0])
+    positions[1, 0] += 0.01
+    edges = torch.tensor([[0, 1], [1, 2], [0, 2], [2, 3], [0, 3]])
+    edges = torch.cat([edges, edges + 4])
+    expected = (0.01**2 + (math.sqrt(1.0001) - 1) ** 2) / 5 / 2
+    assert float(edge_length_error(positions, target, edges, [4, 4])) == pytest.approx(expected, rel=1e-9)
+    # Frames of different sizes weigh alike: frame 1 alone (its edges renumbered) has no error.
+    assert float(edge_length_error(positions[4:], target[4:], edges[5:] - 4, [4])) == pytest.approx(0.0, abs=1e-24)
+    # In runtime_terms: off by default; λ_edge × scale × the one frame's edge mean.
+    frame = positions[:4].clone().requires_grad_()
+    off = _terms(frame, SQUARE, SQUARE_FACES, _nearest([0, 0, 0, 0]), physics_on_runtime=False)
+    assert "a_edge_length" not in off
+    on = _terms(frame, SQUARE, SQUARE_FACES, _nearest([0, 0, 0, 0]), physics_on_runtime=False,
+                edge_weight=3.0, position_scale=1e4)
+    assert on["a_edge_length"].item() == pytest.approx(3.0 * 1e4 * 2 * expected, rel=1e-9)
+    on["a_edge_length"].backward()
+    assert frame.grad[1, 0] > 0 and frame.grad[3].abs().max() == 0  # only the lengthened edges pull
 
 
 def test_physics_terms_on_a_stretched_triangle():

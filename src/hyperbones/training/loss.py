@@ -50,6 +50,24 @@ def physics_terms(positions_next: torch.Tensor, positions: torch.Tensor, velocit
     }
 
 
+def edge_length_error(positions: torch.Tensor, target: torch.Tensor, edges: torch.Tensor,
+                      frame_sizes: Sequence[int]) -> torch.Tensor:
+    """() mean over frames of the mean over a frame's edges of (|p_i − p_j| − |t_i − t_j|)² (m²).
+
+    positions, target: (V,3) the frames' vertices one after another (``frame_sizes`` each);
+    edges: (E,2) in that numbering, each within one frame. An edge's frame is its first vertex's.
+    """
+    def lengths(points: torch.Tensor) -> torch.Tensor:
+        return (points[edges[:, 0]] - points[edges[:, 1]]).norm(dim=-1)
+
+    sizes = torch.tensor(list(frame_sizes), device=positions.device)
+    frame_of_vertex = torch.arange(len(sizes), device=positions.device).repeat_interleave(sizes)
+    frame_of_edge = frame_of_vertex[edges[:, 0]]
+    edges_per_frame = torch.bincount(frame_of_edge, minlength=len(sizes)).clamp_min(1).to(positions.dtype)
+    share = 1.0 / (len(sizes) * edges_per_frame[frame_of_edge])
+    return ((lengths(positions) - lengths(target)).square() * share).sum()
+
+
 def laplacian(values: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
     """(V,C) per-vertex values, (E,2) undirected edges -> (V,C) value minus the mean of its
     neighbours (one full ``diffuse`` step takes each vertex to that mean)."""
@@ -69,12 +87,13 @@ def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Te
     (Vb,3), the F bodies laid one after another, whose faces are ``body_faces``;
     config: ``JointConfig``.
 
-    L_3D = MSE + λ_lap·L_lap + λ_interp·L_interp, each a mean over a frame's vertices with
-    lengths in centimetres (``position_scale``). L_lap is taken on the error A − C: it
-    punishes the per-vertex ripples that sparse bones leave, and is zero when A matches C (on
-    A's positions alone it would also punish every fold C makes). L_interp = mean
-    max(0, ε − d)² with d the signed distance to the nearest body face's plane. The
-    energies, sums over a garment, are averaged over the frames.
+    L_3D = MSE + λ_lap·L_lap + λ_interp·L_interp (+ λ_edge·L_edge where ``edge_weight`` is
+    set), each a mean over a frame's vertices (L_edge: its edges) with lengths scaled by
+    ``position_scale``. L_lap is taken on the error A − C: it punishes the per-vertex ripples
+    that sparse bones leave, and is zero when A matches C (on A's positions alone it would
+    also punish every fold C makes). L_interp = mean max(0, ε − d)² with d the signed
+    distance to the nearest body face's plane. The energies, sums over a garment, are
+    averaged over the frames.
     """
     sizes = [positions.shape[0]] if frame_sizes is None else list(frame_sizes)
     if sum(sizes) != positions.shape[0]:
@@ -94,6 +113,9 @@ def runtime_terms(positions: torch.Tensor, target: torch.Tensor, edges: torch.Te
         "a_laplacian": config.laplacian_weight * (laplacian(error, edges).square().sum(-1) * share).sum() * scale,
         "a_interpenetration": config.interpenetration_weight * (inside.square() * share).sum() * scale,
     }
+    if config.edge_weight:
+        edge_error = edge_length_error(positions, target.detach(), edges, sizes)
+        terms["a_edge_length"] = config.edge_weight * edge_error * scale
     if config.physics_on_runtime:
         terms["a_stretching"] = stretching_energy(positions, rest) / frames
         terms["a_bending"] = bending_energy(positions, rest) / frames

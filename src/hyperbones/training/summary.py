@@ -7,6 +7,7 @@ from pathlib import Path
 
 TERMS = ("loss", "stretching", "bending", "gravity", "inertia", "collision", "friction",  # the teacher's
          "a_mse", "a_stretching", "a_bending", "a_collision", "a_interpenetration", "a_laplacian",  # Module A's
+         "a_edge_length",
          "grad_norm", "collision_weight", "rollout", "learning_rate", "steps_per_second")
 
 
