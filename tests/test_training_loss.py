@@ -95,8 +95,17 @@ def test_edge_length_term_by_hand():
     edges = torch.cat([edges, edges + 4])
     expected = (0.01**2 + (math.sqrt(1.0001) - 1) ** 2) / 5 / 2
     assert float(edge_length_error(positions, target, edges, [4, 4])) == pytest.approx(expected, rel=1e-9)
-    # Frames of different sizes weigh alike: frame 1 alone (its edges renumbered) has no error.
+    # Frame 1 alone (its edges renumbered), moved rigidly, has no error.
     assert float(edge_length_error(positions[4:], target[4:], edges[5:] - 4, [4])) == pytest.approx(0.0, abs=1e-24)
+    # Frames of different sizes weigh alike: frame 0 (five edges) beside a triangle (three edges)
+    # whose edge 0-1 is 2 cm longer than C's.
+    triangle = SQUARE[:3].clone()
+    stretched = triangle.clone()
+    stretched[1, 0] += 0.02
+    mixed = edge_length_error(torch.cat([positions[:4], stretched]), torch.cat([target[:4], triangle]),
+                              torch.cat([edges[:5], torch.tensor([[4, 5], [5, 6], [4, 6]])]), [4, 3])
+    triangle_error = (0.02**2 + (math.sqrt(1 + 0.02**2) - 1) ** 2) / 3
+    assert float(mixed) == pytest.approx((2 * expected + triangle_error) / 2, rel=1e-9)
     # In runtime_terms: off by default; λ_edge × scale × the one frame's edge mean.
     frame = positions[:4].clone().requires_grad_()
     off = _terms(frame, SQUARE, SQUARE_FACES, _nearest([0, 0, 0, 0]), physics_on_runtime=False)

@@ -188,9 +188,9 @@ class JointConfig:
     laplacian_weight: float = 0.1
     """λ_lap on the Laplacian of A's error (the paper's; 0: the ablation)."""
     edge_weight: float = 0.0
-    """λ_edge on the error of A's edge lengths against C's (mean over a frame's edges of (|a_i − a_j| −
-    |c_i − c_j|)², scaled as L_MSE). Not in the paper: it aims at A's stretch itself, where L_MSE and L_lap
-    see it only as millimetres among centimetres (docs/experiments/2026-11-30-edge-length-loss.md). 0: off."""
+    """λ_edge on the error of A's edge lengths against C's (the mean over a frame's edges of the squared
+    difference of their lengths, scaled as L_MSE). Not in the paper: it aims at A's stretch itself, where
+    L_MSE and L_lap see it only as millimetres among centimetres (docs/experiments/*edge-length-loss.md). 0: off."""
     interpenetration_weight: float = 0.1
     """λ_interp on A's interpenetration term (the paper's; 0: the ablation)."""
     interpenetration_epsilon: float = 0.003
