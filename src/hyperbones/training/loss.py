@@ -63,7 +63,7 @@ def edge_length_error(positions: torch.Tensor, target: torch.Tensor, edges: torc
     sizes = torch.tensor(list(frame_sizes), device=positions.device)
     frame_of_vertex = torch.arange(len(sizes), device=positions.device).repeat_interleave(sizes)
     frame_of_edge = frame_of_vertex[edges[:, 0]]
-    edges_per_frame = torch.bincount(frame_of_edge, minlength=len(sizes)).clamp_min(1).to(positions.dtype)
+    edges_per_frame = torch.bincount(frame_of_edge, minlength=len(sizes)).to(positions.dtype)  # only read where > 0
     share = 1.0 / (len(sizes) * edges_per_frame[frame_of_edge])
     return ((lengths(positions) - lengths(target)).square() * share).sum()
 
