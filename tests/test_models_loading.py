@@ -132,3 +132,36 @@ def test_export_shares_the_teacher_beside_it_when_asked(pair, tmp_path, capsys):
     exported = load_checkpoint(whole)["ema"]
     assert same_state(load_checkpoint(folder / "hyperbones.pt")["model"], exported)
     assert same_state(load_checkpoint(tmp_path / "again.pt")["model"], exported)
+
+
+def test_export_stores_the_shipped_runtime_settings_unless_told_otherwise(pair, tmp_path, capsys):
+    """A training checkpoint stores no runtime settings; its export takes the shipped model's (so
+    it runs and measures as the shipped one does), or another model's, or the defaults, with
+    ``--runtime`` over them; a teacher takes none."""
+    from dataclasses import replace
+
+    from hyperbones.runtime.config import RuntimeConfig
+    from hyperbones.runtime.simulator import runtime_config_of
+
+    teacher, whole = pair
+    training = save_checkpoint(tmp_path / "checkpoint.pt",
+                               {key: value for key, value in load_checkpoint(whole).items() if key != "runtime_config"})
+    shipped = runtime_config_of(load_checkpoint(SHIPPED_HYPERBONES))
+    assert shipped != RuntimeConfig()
+
+    def exported(*options):
+        assert main(["export", str(training), "--out", str(tmp_path / "out.pt"), *options]) == 0
+        return runtime_config_of(torch.load(tmp_path / "out.pt", weights_only=True))
+
+    assert exported() == shipped
+    assert f"proxy_vertices = {shipped.proxy_vertices}" in (tmp_path / "out.md").read_text()
+    assert exported("--runtime", "follow=0.9") == replace(shipped, follow=0.9)
+    assert exported("--runtime-from", "defaults") == RuntimeConfig()
+    assert exported("--runtime-from", str(whole), "--runtime", "untangle=false") == \
+        RuntimeConfig(follow=0.5, untangle=False)
+    capsys.readouterr()
+    assert main(["export", str(training), "--out", str(tmp_path / "bad.pt"), "--runtime-from", str(teacher)]) == 2
+    assert f"{teacher}: stores no runtime settings" in capsys.readouterr().err
+    assert main(["export", str(teacher), "--out", str(tmp_path / "t.pt"), "--runtime", "follow=0.9"]) == 2
+    assert "a teacher has no runtime settings" in capsys.readouterr().err
+    assert not (tmp_path / "bad.pt").exists() and not (tmp_path / "t.pt").exists()

@@ -51,13 +51,14 @@ def run_export(args) -> int:
     summary = Path(args.summary) if args.summary else out.with_suffix(".md")
     if args.share_teacher and not (out.parent / "teacher.pt").is_file():
         raise ParameterError(f"--share-teacher: no teacher.pt beside {out} to read the teacher from")
+    runtime = {"runtime_from": args.runtime_from, "runtime": args.runtime}
     # The weights and their summary appear together or not at all (each folder's set is staged).
     with staged_outputs(out.parent) as staging:
         if summary.parent.resolve() == out.parent.resolve():
-            export_weights(args.checkpoint, staging / out.name, summary=staging / summary.name)
+            export_weights(args.checkpoint, staging / out.name, summary=staging / summary.name, **runtime)
         else:
             with staged_outputs(summary.parent) as summary_staging:
-                export_weights(args.checkpoint, staging / out.name, summary=summary_staging / summary.name)
+                export_weights(args.checkpoint, staging / out.name, summary=summary_staging / summary.name, **runtime)
         if args.share_teacher:
             from hyperbones.models.loading import load_checkpoint, save_checkpoint, without_teacher
 
@@ -83,6 +84,13 @@ def add_export(sub) -> None:
                         help="a HyperBones model: store its teacher as read from the teacher.pt beside --out, "
                              "which must hold the same weights bit for bit, not as a copy (how the shipped "
                              "hyperbones.pt is saved; the two files then travel together)")
+    export.add_argument("--runtime-from", default=None, metavar="MODEL.pt|defaults",
+                        help="a HyperBones model: store the runtime settings of this exported model ('defaults': "
+                             "RuntimeConfig's own) (default: the checkpoint's, else the shipped model's, so a new "
+                             "model runs and measures as the shipped one does)")
+    export.add_argument("--runtime", default=None, metavar="KEY=VALUE,...",
+                        help="a HyperBones model: settings over those, e.g. 'proxy_vertices=0' (the keys are the "
+                             "fields of hyperbones.runtime.config.RuntimeConfig)")
     export.set_defaults(func=run_export)
 
 

@@ -19,6 +19,7 @@ the correction is spread over every vertex and finished there (``runtime.garment
 
 from __future__ import annotations
 
+import functools
 import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -53,18 +54,30 @@ def transform_points(transform: torch.Tensor, points: torch.Tensor) -> torch.Ten
 
 
 def runtime_config_of(payload: dict, source: str | Path = "checkpoint") -> RuntimeConfig:
-    """The runtime settings a HyperBones checkpoint (from ``source``) was exported with (the
-    defaults for one that stores none: training checkpoints and older exports); a stored one
-    that is not a valid ``RuntimeConfig`` is an ``InputFileError`` naming ``source``."""
+    """The runtime settings a HyperBones checkpoint (from ``source``) was exported with; one that
+    stores none (a training checkpoint, an older export) runs with the shipped model's, so that
+    it runs and measures as it would if shipped (``RuntimeConfig``'s bare defaults are another
+    runtime: docs/experiments/2026-11-30-exported-runtime-settings.md). A stored one that is not
+    a valid ``RuntimeConfig`` is an ``InputFileError`` naming ``source``."""
     stored = payload.get("runtime_config")
     if stored is None:
-        return RuntimeConfig()
+        return shipped_runtime_config()
     if not isinstance(stored, dict):
         raise InputFileError(source, f"its runtime_config is a {type(stored).__name__}, not a table of settings")
     try:
         return RuntimeConfig.from_dict(dict(stored), "runtime_config")
     except (ParameterError, TypeError) as error:
         raise InputFileError(source, f"bad runtime_config ({error})") from None
+
+
+@functools.cache
+def shipped_runtime_config() -> RuntimeConfig:
+    """The runtime settings the shipped model stores (``RuntimeConfig()`` where the package holds
+    no model, or one that stores none)."""
+    if not SHIPPED_HYPERBONES.exists():
+        return RuntimeConfig()
+    stored = torch.load(SHIPPED_HYPERBONES, map_location="cpu", weights_only=True).get("runtime_config")
+    return RuntimeConfig() if stored is None else runtime_config_of({"runtime_config": stored}, SHIPPED_HYPERBONES)
 
 
 @dataclass

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import torch
 
-from hyperbones.errors import InputFileError
+from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.loading import load_checkpoint, save_checkpoint
 
@@ -84,20 +84,27 @@ def load_optimizer_state(path: str | Path, payload: dict, map_location: str | to
     return state["optimizer"]
 
 
-def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path | None = None) -> Path:
+def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path | None = None,
+                   runtime_from: str | Path | None = None, runtime: str | None = None) -> Path:
     """Write the inference part of a training checkpoint (the weights' moving average when it
     keeps one, else the model; config, step) to ``out``, and ``summary`` (default: ``<out>.md``): the
     config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
     and a summary of the log, both up to the checkpoint's step. A HyperBones model also keeps
-    the ``RuntimeConfig`` it is meant to run with (the checkpoint's, else the defaults)."""
+    the ``RuntimeConfig`` it is meant to run with (``export_runtime_config``: by default the
+    checkpoint's, else the shipped model's), written into the summary too."""
     from hyperbones.training.summary import read_log, training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
     slim = {"model": payload.get("ema") or payload["model"], "config": payload["config"], "step": payload["step"]}
+    runtime_text = ""
     if "runtime" in payload["config"]:  # a HyperBones model: the runtime settings it ships with
-        from hyperbones.runtime.config import RuntimeConfig
-
-        slim["runtime_config"] = payload.get("runtime_config") or RuntimeConfig().as_dict()
+        settings, source = export_runtime_config(payload, checkpoint, runtime_from, runtime)
+        slim["runtime_config"] = settings.as_dict()
+        runtime_text = (f"Runtime settings stored with it ({source}):\n\n```\n"
+                        + "".join(f"{key} = {value!r}\n" for key, value in settings.as_dict().items()) + "```\n\n")
+    elif runtime_from is not None or runtime:
+        raise ParameterError(f"{checkpoint}: a teacher has no runtime settings (--runtime-from, --runtime are for "
+                             "a HyperBones model)")
     out = save_checkpoint(out, slim)
     log_dir = Path(checkpoint).parent / "tensorboard"
     if log_dir.exists():
@@ -111,8 +118,32 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
     with atomic_path(Path(summary) if summary else out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
-                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{text}")
+                       f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{runtime_text}{text}")
     return out
+
+
+def export_runtime_config(payload: dict, checkpoint: str | Path, runtime_from: str | Path | None = None,
+                          runtime: str | None = None):
+    """The runtime settings an exported HyperBones model stores, and where they came from (for the
+    summary): those of ``runtime_from`` (an exported model, or ``"defaults"`` for
+    ``RuntimeConfig()``), else the checkpoint's own, else (a training checkpoint stores none) the
+    shipped model's, as ``runtime_config_of`` reads it; then ``runtime`` (``key=value,...``) over them."""
+    from hyperbones.runtime.config import RuntimeConfig
+    from hyperbones.runtime.simulator import runtime_config_of
+
+    if runtime_from == "defaults":
+        settings, source = RuntimeConfig(), "the defaults of RuntimeConfig"
+    elif runtime_from is not None:
+        model = load_checkpoint(runtime_from)
+        if model.get("runtime_config") is None:
+            raise InputFileError(runtime_from, "stores no runtime settings (not an exported HyperBones model)")
+        settings, source = runtime_config_of(model, runtime_from), f"those of {runtime_from}"
+    else:  # a training checkpoint stores none: runtime_config_of gives it the shipped model's
+        settings = runtime_config_of(payload, checkpoint)
+        source = f"those {checkpoint} stores" if payload.get("runtime_config") is not None else "the shipped model's"
+    if runtime:
+        settings, source = settings.with_overrides(runtime), f"{source}, with {runtime}"
+    return settings, source
 
 
 def _config_text(config: dict, prefix: str = "") -> str:
