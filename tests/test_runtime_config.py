@@ -24,7 +24,7 @@ CHANGED = {
     "follow_far": 0.1,
     "contact": False,
     "contact_margin": 0.006,
-    "query_distance": 0.02,
+    "query_distance": 0.01,
     "round_query_distance": 0.015,
     "round_search_gap": 0.008,
     "push_rounds": 1,

@@ -83,11 +83,13 @@ def test_the_runtime_steps_with_torch_alone(tmp_path, body, proxy_vertices):
     # different faces of the tie (same distance, another face normal to push along), and the
     # runtime carries that on: over six frames half the vertices agree to ~10 µm, none by 2 mm.
     gap = (torch_only - with_warp).norm(dim=-1)
-    print(f"torch vs warp search: median {float(gap.median()):.2e} m, max {float(gap.max()):.2e} m")
+    print(f"torch vs warp search: median {float(gap.median()):.2e} m, max {float(gap.max()):.2e} m, "
+          f"over 1 mm {float((gap > 1e-3).float().mean()):.2%}, over 2 mm {float((gap > 2e-3).float().mean()):.2%}")
     if not proxy_vertices:
         assert float(gap.median()) < 5e-5 and float(gap.max()) < 2e-3
     else:
         # With a proxy more decisions hang on a threshold (which vertices a plane holds, which
-        # are searched at the end), so a rounding's difference flips a few more: 50-70 of the
-        # 6,432 vertex-frames differ by over 1 mm (the numba and the torch sweeps alone do that).
-        assert float(gap.median()) < 5e-5 and float(gap.flatten().quantile(0.99)) < 2e-3
+        # are searched at the end), and a flip on a proxy vertex moves the garment vertices it
+        # carries, so a rounding's difference flips a few more: with the shipped model 0.5-1.5 %
+        # of the vertex-frames differ by over 2 mm (which, depends on the thread count).
+        assert float(gap.median()) < 5e-5 and float((gap > 2e-3).float().mean()) < 0.03
