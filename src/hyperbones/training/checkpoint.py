@@ -17,12 +17,17 @@ from __future__ import annotations
 import glob
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import torch
 
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.io_utils import atomic_path
 from hyperbones.models.loading import load_checkpoint, save_checkpoint
+
+if TYPE_CHECKING:
+    from hyperbones.runtime.config import RuntimeConfig
+
 
 def optimizer_path(checkpoint: str | Path, step: int | None = None) -> Path:
     """Where a training checkpoint's optimiser state is kept: ``optimizer.pt`` beside it; with
@@ -123,7 +128,7 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
 
 
 def export_runtime_config(payload: dict, checkpoint: str | Path, runtime_from: str | Path | None = None,
-                          runtime: str | None = None):
+                          runtime: str | None = None) -> tuple[RuntimeConfig, str]:
     """The runtime settings an exported HyperBones model stores, and where they came from (for the
     summary): those of ``runtime_from`` (an exported model, or ``"defaults"`` for
     ``RuntimeConfig()``), else the checkpoint's own, else (a training checkpoint stores none) the
