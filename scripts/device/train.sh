@@ -25,7 +25,7 @@ HYPERBONES_CONFIG=configs/hyperbones-small.toml
 # the first step: 48 fit one simulated batch of 64 with room for the drift check's refusals. The CPU keeps
 # the config's 4 frames (docs/experiments/2026-11-28-phase2-frames-in-batches.md). Rollouts whose garment came
 # off above the hips are refused too (docs/experiments/2026-11-29-garments-that-come-off.md); the config
-# itself stays the shipped model's recipe, which had no such check. So does the loss on A's edge lengths against
+# itself stays the shipped model's stage-2 recipe, which had no such check. So does the loss on A's edge lengths against
 # C's, which validation preferred at 1e4 (docs/experiments/2026-11-30-edge-length-loss.md).
 GPU_PHASE2=(--set=joint.frames_per_step=64 --set=joint.frames_per_rollout=8 --set=joint.cache_size=48
             --set=joint.refresh_every=8 --set=joint.max_detached_pct=10 --set=joint.edge_weight=10000)
