@@ -32,7 +32,7 @@ from hyperbones.devices import cpu_has_bfloat16
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.surface import found_points
-from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, model_of
+from hyperbones.models.loading import SHIPPED_HYPERBONES, hyperbones_payload, load_checkpoint, model_of
 from hyperbones.models.module_a import ModuleA, bone_codes, correct_bones, heading_frame
 from hyperbones.physics.cloth import ClothRest
 from hyperbones.physics.contact_planes import ContactPlanes
@@ -70,14 +70,20 @@ def runtime_config_of(payload: dict, source: str | Path = "checkpoint") -> Runti
         raise InputFileError(source, f"bad runtime_config ({error})") from None
 
 
+def runtime_config_in(path: str | Path) -> RuntimeConfig | None:
+    """The runtime settings the model file ``path`` stores (None where it stores none: a training
+    checkpoint, a teacher); a missing or bad file is an ``InputFileError`` naming it."""
+    payload = load_checkpoint(path)
+    return None if payload.get("runtime_config") is None else runtime_config_of(payload, path)
+
+
 @functools.cache
 def shipped_runtime_config() -> RuntimeConfig:
     """The runtime settings the shipped model stores (``RuntimeConfig()`` where the package holds
     no model, or one that stores none)."""
     if not SHIPPED_HYPERBONES.exists():
         return RuntimeConfig()
-    stored = torch.load(SHIPPED_HYPERBONES, map_location="cpu", weights_only=True).get("runtime_config")
-    return RuntimeConfig() if stored is None else runtime_config_of({"runtime_config": stored}, SHIPPED_HYPERBONES)
+    return runtime_config_in(SHIPPED_HYPERBONES) or RuntimeConfig()
 
 
 @dataclass

@@ -105,8 +105,7 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
     if "runtime" in payload["config"]:  # a HyperBones model: the runtime settings it ships with
         settings, source = export_runtime_config(payload, checkpoint, runtime_from, runtime)
         slim["runtime_config"] = settings.as_dict()
-        runtime_text = (f"Runtime settings stored with it ({source}):\n\n```\n"
-                        + "".join(f"{key} = {value!r}\n" for key, value in settings.as_dict().items()) + "```\n\n")
+        runtime_text = f"Runtime settings stored with it ({source}):\n\n```\n{_config_text(settings.as_dict())}```\n\n"
     elif runtime_from is not None or runtime:
         raise ParameterError(f"{checkpoint}: a teacher has no runtime settings (--runtime-from, --runtime are for "
                              "a HyperBones model)")
@@ -134,15 +133,14 @@ def export_runtime_config(payload: dict, checkpoint: str | Path, runtime_from: s
     ``RuntimeConfig()``), else the checkpoint's own, else (a training checkpoint stores none) the
     shipped model's, as ``runtime_config_of`` reads it; then ``runtime`` (``key=value,...``) over them."""
     from hyperbones.runtime.config import RuntimeConfig
-    from hyperbones.runtime.simulator import runtime_config_of
+    from hyperbones.runtime.simulator import runtime_config_in, runtime_config_of
 
     if runtime_from == "defaults":
         settings, source = RuntimeConfig(), "the defaults of RuntimeConfig"
     elif runtime_from is not None:
-        model = load_checkpoint(runtime_from)
-        if model.get("runtime_config") is None:
+        settings, source = runtime_config_in(runtime_from), f"those of {runtime_from}"
+        if settings is None:
             raise InputFileError(runtime_from, "stores no runtime settings (not an exported HyperBones model)")
-        settings, source = runtime_config_of(model, runtime_from), f"those of {runtime_from}"
     else:  # a training checkpoint stores none: runtime_config_of gives it the shipped model's
         settings = runtime_config_of(payload, checkpoint)
         source = f"those {checkpoint} stores" if payload.get("runtime_config") is not None else "the shipped model's"
