@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from hyperbones.cli import main
+from hyperbones.devices import runs_bfloat16_natively
 from hyperbones.errors import ParameterError
 from hyperbones.runtime.config import RuntimeConfig, parse_overrides
 
@@ -102,6 +103,10 @@ def test_each_setting_changes_the_output(walk, default_walk, proxy_walk, name):
         base = RuntimeConfig(proxy_vertices=CHANGED["proxy_vertices"], proxy_sweeps=0)
         reference = _run(walk, base)
     changed = _run(walk, replace(base, **{name: CHANGED[name]}))
+    if name == "bfloat16" and not runs_bfloat16_natively(torch.device("cpu")):
+        # Emulated bfloat16 is slower than float32, so this CPU runs float32 either way.
+        assert torch.equal(changed, reference)
+        return
     assert float((changed - reference).abs().max()) > 1e-5, name
 
 

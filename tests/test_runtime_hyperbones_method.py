@@ -74,6 +74,30 @@ def test_simulator_load_and_module_a_alone(joint_checkpoint, body):
                                                               simulator.module_a.state_dict().values()))
 
 
+def test_the_conv_mlp_runs_in_bfloat16_only_where_the_device_has_it(joint_checkpoint, body, monkeypatch):
+    """``RuntimeConfig.bfloat16`` (the shipped model's setting) is honoured where bfloat16 is
+    native; on a CPU that would emulate it (several times slower than float32) the Conv-MLP runs
+    in float32, and the run's metrics say which dtype ran."""
+    import hyperbones.runtime.simulator as simulator_module
+    from hyperbones.garment.templates import make_template
+    from hyperbones.runtime.simulator import Simulator
+
+    garment = make_template("tshirt", body, vertices=1000)
+    for native, bfloat16, expected in ((True, True, torch.bfloat16), (False, True, torch.float32),
+                                       (True, False, torch.float32)):
+        monkeypatch.setattr(simulator_module, "runs_bfloat16_natively", lambda device, native=native: native)
+        simulator = Simulator.load([(garment, body)], joint_checkpoint, overrides={"bfloat16": bfloat16})
+        assert simulator.config.bfloat16 is bfloat16  # the setting is kept as asked; the dtype is the device's
+        assert simulator.conv_mlp_dtype == expected
+        assert {p.dtype for p in simulator.module_a.refiner.parameters()} == {expected}
+    monkeypatch.undo()
+    raw = run_simulation("hyperbones-raw", "tshirt", "walk", vertices=1000, frames=2, checkpoint=str(joint_checkpoint),
+                         device="cpu")
+    ran = "bfloat16" if simulator_module.runs_bfloat16_natively(torch.device("cpu")) else "float32"
+    assert raw.metrics["conv_mlp_dtype"] == (ran if raw.metrics["runtime"]["bfloat16"] else "float32")
+    assert run_simulation("lbs", "tshirt", "walk", vertices=1000, frames=2).metrics["conv_mlp_dtype"] is None
+
+
 def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path, monkeypatch):
     """--uv-resolution reaches the UV maps Module A runs on (the checkpoint was trained at
     R = 16; without the option the maps take the runtime settings', which for a training

@@ -156,6 +156,7 @@ def run(folder: str | Path, device: str = "cuda", quick: bool = False, frames: i
                         simulator = Simulator(module_a, [remade[resolution]] * batch, the_device,
                                               body_faces=rig.faces if contact else None,
                                               config=replace(config, bfloat16=bfloat16))
+                        row.dtype = "bf16" if simulator.conv_mlp_dtype == torch.bfloat16 else "fp32"  # what ran
                         row.ms_per_frame = _median_ms(simulator, rotations, roots, bodies_at if contact else None,
                                                       the_device, warmup, frames, row_seconds)
                         row.ms_per_character = row.ms_per_frame / batch

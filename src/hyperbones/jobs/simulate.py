@@ -102,7 +102,8 @@ def run_simulation(method: str, garment: str, motion: str, body: str | None = No
                     "ms_median": float(frame_ms.median()), "ms_p95": float(torch.quantile(frame_ms, 0.95)),
                     "method": method, "garment": garment if Path(garment).suffix == "" else Path(garment).name,
                     "garment_vertices": draped.num_vertices, "motion": the_motion.name, "body": shape.label(),
-                    "fps": the_motion.fps, "runtime": _runtime_record(solver)})
+                    "fps": the_motion.fps, "runtime": _runtime_record(solver),
+                    "conv_mlp_dtype": _conv_mlp_dtype(solver)})
     problem = runaway_problem(metrics)
     if problem:
         warnings.warn(f"{method} on {metrics['garment']}, {metrics['motion']}: {problem}; its metrics mean little",
@@ -140,6 +141,14 @@ def _runtime_record(solver) -> dict | None:
     """The runtime settings a method ran with (None for methods without the runtime)."""
     config = getattr(solver, "runtime_config", None)
     return None if config is None else config.as_dict()
+
+
+def _conv_mlp_dtype(solver) -> str | None:
+    """The dtype Module A's Conv-MLP ran in ("float32" or "bfloat16": ``RuntimeConfig.bfloat16``
+    where the device runs it natively); None for methods without the runtime."""
+    simulator = getattr(solver, "simulator", None)
+    dtype = getattr(simulator, "conv_mlp_dtype", None)
+    return None if dtype is None else str(dtype).removeprefix("torch.")
 
 
 def export_simulation(result: SimulationResult, out_dir: str | Path, preview: bool = True, obj: bool = False,

@@ -38,10 +38,11 @@ class RuntimeConfig:
     the garment its bones skin; off: the bones' garment alone, and no UV stage runs. The
     runtime's contact then does what the Conv-MLP did for contact (docs/experiments/*-realtime-runtime-4.md)."""
     bfloat16: bool = False
-    """Run the Conv-MLP in bfloat16 (its weights and inputs; the rest stays float32): about half
-    its time where the processor has bfloat16 units (GPUs, recent x86), at ~0.5 mm of
-    displacement. The shipped model stores it on (validated); a CPU without such units runs it
-    slower than float32, and the ``Simulator`` warns."""
+    """Run the Conv-MLP in bfloat16 (its weights and inputs; the rest stays float32) where the
+    device has bfloat16 units (GPUs, x86 with AVX512-BF16 or AMX): about half its time there, at
+    ~0.5 mm of displacement. Elsewhere bfloat16 is emulated, several times slower than float32, so
+    the ``Simulator`` runs float32 instead and says so in ``conv_mlp_dtype``. The shipped model
+    stores it on (validated)."""
     follow: float = 0.6
     """Share of the way from the carried garment to Module A's output taken each frame by cloth on
     the skin (1: Module A's output as it is); the cloth lags as a damped first-order system."""

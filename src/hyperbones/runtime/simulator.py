@@ -20,7 +20,6 @@ the correction is spread over every vertex and finished there (``runtime.garment
 from __future__ import annotations
 
 import functools
-import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, TypeVar
@@ -28,7 +27,7 @@ from typing import TYPE_CHECKING, TypeVar
 import torch
 
 from hyperbones.body.skeleton import forward_kinematics, skinning_transforms
-from hyperbones.devices import cpu_has_bfloat16
+from hyperbones.devices import runs_bfloat16_natively
 from hyperbones.errors import InputFileError, ParameterError
 from hyperbones.geometry.lbs import linear_blend_skinning
 from hyperbones.geometry.surface import found_points
@@ -235,10 +234,11 @@ class Simulator:
         if len(resolutions) > 1:
             raise ParameterError(f"identities stepped together need one UV resolution, got {sorted(resolutions)}")
         self.device = torch.device(device)
-        if config.bfloat16 and self.device.type == "cpu" and not cpu_has_bfloat16():
-            warnings.warn("the runtime's Conv-MLP runs in bfloat16, which this CPU lacks units for: it is slower "
-                          "than float32 here (--runtime bfloat16=false)", stacklevel=2)
-        self.module_a = module_a.for_inference(self.device, config.bfloat16)
+        # The Conv-MLP's dtype: bfloat16 as config.bfloat16 asks, but only where this device runs it
+        # natively (emulated, it is several times slower than float32).
+        bfloat16 = config.bfloat16 and runs_bfloat16_natively(self.device)
+        self.conv_mlp_dtype = torch.bfloat16 if bfloat16 else torch.float32
+        self.module_a = module_a.for_inference(self.device, bfloat16)
         self.identities = [identity.to(self.device) for identity in identities]
         self.batch = IdentityBatch.of(self.identities)
         # The skeleton -> bones stage of every character, stacked, on the CPU.
