@@ -2,7 +2,7 @@
 
 Runs ``hyperbones eval`` on the validation split (24 runs: two clips x two bodies x six
 garments, 1,500 vertices) for the full runtime, Module A alone (``hyperbones-raw``), and the
-runtime with each correction switched off alone (``--runtime``), then prints their means in
+runtime with each correction switched off or shrunk alone (``--runtime``), then prints their means in
 one Markdown table, each against the full runtime. An eval already in the output folder is not
 run again, so the script resumes where it stopped; the cost of each correction is its stage in
 ``hyperbones bench --profile`` (not measured here: this is about what it buys).
@@ -27,6 +27,10 @@ VARIANTS = {  # name: (method, --runtime settings, what is off)
     "no-untangling": ("hyperbones", "untangle=false", "untangling"),
     "one-round": ("hyperbones", "contact_rounds=1", "the second contact round"),
     "no-projection": ("hyperbones", "projection_iterations=0", "edge projection (push-out and proxy sweeps stay)"),
+    "three-iterations": ("hyperbones", "projection_iterations=3", "two of the five projection iterations"),
+    "eight-sweeps": ("hyperbones", "proxy_sweeps=8", "seven of the proxy's 15 edge sweeps"),
+    "no-sweeps": ("hyperbones", "proxy_sweeps=0", "the proxy's edge sweeps"),
+    "no-conv-mlp": ("hyperbones", "conv_mlp=false", "Module A's Conv-MLP (the bones' garment goes in)"),
     "module-a-alone": ("hyperbones-raw", "", "everything after Module A"),
 }
 METRICS = (("edge_error_pct", "ε_e %", "{:.3f}"), ("area_error_pct", "ε_a %", "{:.3f}"),
