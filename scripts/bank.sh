@@ -6,7 +6,7 @@
 #
 # BANK defaults to ~/.cache/hyperbones/bank (outside the work tree, which is laid anew each
 # session); the seeds to 40 and 42 (another process sharing the bank takes two others).
-# Pause with `pkill -STOP -f "hyperbones rollouts"` and `pkill -CONT ...`; sum it up with
+# Pause with `pkill -STOP -f "hyperbones.cli rollouts"` and `pkill -CONT ...`; sum it up with
 # `python scripts/bank_draws.py BANK`. The teacher runs compiled, and in bfloat16 where the
 # processor has bfloat16 units (docs/experiments/2026-11-30-bfloat16-bank.md).
 set -euo pipefail
@@ -16,7 +16,9 @@ draped_seed=${2:-40}
 carried_seed=${3:-42}
 python=${PYTHON:-.venv/bin/python}
 flags=(--config configs/hyperbones-draped.toml --out "$bank" --count 5 --compile --quiet)
-if grep -q avx512_bf16 /proc/cpuinfo; then flags+=(--bfloat16); fi
+if "$python" -c "from hyperbones.devices import cpu_has_bfloat16 as has; raise SystemExit(not has())"; then
+  flags+=(--bfloat16)
+fi
 mkdir -p "$bank"
 export OMP_NUM_THREADS=1
 while true; do

@@ -30,6 +30,6 @@ def runs_bfloat16_natively(device: torch.device) -> bool:
     CPU with AVX512-BF16 or AMX (``cpu_has_bfloat16``). Elsewhere they are emulated: on an AMD
     EPYC without them the shipped Conv-MLP took 74-81 ms in bfloat16 against 13 ms in float32
     (docs/experiments/2026-11-30-bfloat16-where-native.md)."""
-    if device.type == "cuda":
-        return torch.cuda.is_bf16_supported()
+    if device.type == "cuda":  # not counting emulation (GPUs before Ampere)
+        return torch.cuda.is_bf16_supported(including_emulation=False)
     return device.type == "cpu" and cpu_has_bfloat16()
