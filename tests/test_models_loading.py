@@ -165,3 +165,42 @@ def test_export_stores_the_shipped_runtime_settings_unless_told_otherwise(pair, 
     assert main(["export", str(teacher), "--out", str(tmp_path / "t.pt"), "--runtime", "follow=0.9"]) == 2
     assert "a teacher has no runtime settings" in capsys.readouterr().err
     assert not (tmp_path / "bad.pt").exists() and not (tmp_path / "t.pt").exists()
+
+
+def test_an_exported_model_exported_again_keeps_its_weights_and_its_training_record(pair, tmp_path, capsys):
+    """Exporting an exported model changes only the runtime settings it stores: the weights,
+    config and step stay bit for bit, and the training part of its summary (which a model that
+    left its run has no log to rebuild from) is carried into the new summary."""
+    from dataclasses import replace
+
+    from hyperbones.runtime.simulator import runtime_config_of
+
+    _, whole = pair
+    assert main(["export", str(whole), "--out", str(tmp_path / "first.pt")]) == 0
+    first_summary = (tmp_path / "first.md").read_text()
+    # As a run with a TensorBoard log writes it (this fixture's run has none).
+    record = "Training took 0.9 h of wall-clock time to this step.\n\nTraining log: | steps | loss |\n"
+    (tmp_path / "first.md").write_text(first_summary.replace("(no TensorBoard log beside the checkpoint)\n", record))
+    assert main(["export", str(tmp_path / "first.pt"), "--out", str(tmp_path / "again" / "second.pt"),
+                 "--runtime", "uv_resolution=24", "--summary-from", str(tmp_path / "first.md")]) == 0
+    first, second = (torch.load(tmp_path / name, weights_only=True) for name in ("first.pt", "again/second.pt"))
+    assert same_state(first["model"], second["model"])
+    assert (first["config"], first["step"]) == (second["config"], second["step"])
+    assert runtime_config_of(second) == replace(runtime_config_of(first), uv_resolution=24)
+    summary = (tmp_path / "again" / "second.md").read_text()
+    assert "uv_resolution = 24" in summary and summary.endswith(record)
+    assert f"Exported from {tmp_path / 'first.pt'}, itself an export" in summary
+    # Without --summary-from, the summary beside the model is read.
+    assert main(["export", str(tmp_path / "first.pt"), "--out", str(tmp_path / "third.pt")]) == 0
+    assert (tmp_path / "third.md").read_text().endswith(record)
+
+    capsys.readouterr()
+    missing = tmp_path / "nowhere.md"
+    assert main(["export", str(tmp_path / "first.pt"), "--out", str(tmp_path / "bad.pt"),
+                 "--summary-from", str(missing)]) == 2
+    assert f"{missing}: missing" in capsys.readouterr().err
+    (tmp_path / "other.md").write_text("# notes\n")
+    assert main(["export", str(tmp_path / "first.pt"), "--out", str(tmp_path / "bad.pt"),
+                 "--summary-from", str(tmp_path / "other.md")]) == 2
+    assert "holds no training summary" in capsys.readouterr().err
+    assert not (tmp_path / "bad.pt").exists() and not (tmp_path / "bad.md").exists()

@@ -51,7 +51,7 @@ def run_export(args) -> int:
     summary = Path(args.summary) if args.summary else out.with_suffix(".md")
     if args.share_teacher and not (out.parent / "teacher.pt").is_file():
         raise ParameterError(f"--share-teacher: no teacher.pt beside {out} to read the teacher from")
-    runtime = {"runtime_from": args.runtime_from, "runtime": args.runtime}
+    runtime = {"runtime_from": args.runtime_from, "runtime": args.runtime, "summary_from": args.summary_from}
     # The weights and their summary appear together or not at all (each folder's set is staged).
     with staged_outputs(out.parent) as staging:
         if summary.parent.resolve() == out.parent.resolve():
@@ -74,11 +74,18 @@ def add_export(sub) -> None:
                             description="Writes OUT (the weights' moving average + config + step, and for a "
                                         "HyperBones model its RuntimeConfig; loads with weights_only) and OUT with "
                                         ".md: the config, training wall time and a summary of the run's TensorBoard "
-                                        "log up to the checkpoint's step.")
-    export.add_argument("checkpoint", help="a run's checkpoint.pt")
+                                        "log up to the checkpoint's step. Given an exported HyperBones model "
+                                        "instead, it writes the same weights with other runtime settings "
+                                        "(--runtime), carrying the training record of its summary over.")
+    export.add_argument("checkpoint", help="a run's checkpoint.pt, or an exported model to store other runtime "
+                                           "settings with (its weights unchanged)")
     options.add_out(export, "output .pt (model weights + config)")
     export.add_argument("--summary", default=None,
                         help="where to write the .md summary (default: beside --out; the shipped models' are in "
+                             "docs/checkpoints/)")
+    export.add_argument("--summary-from", default=None, metavar="MD",
+                        help="an exported model as CHECKPOINT: its summary, whose training record is carried into "
+                             "the new one (default: CHECKPOINT with .md, when it exists; the shipped models' are in "
                              "docs/checkpoints/)")
     export.add_argument("--share-teacher", action="store_true",
                         help="a HyperBones model: store its teacher as read from the teacher.pt beside --out, "

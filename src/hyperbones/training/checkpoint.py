@@ -90,13 +90,18 @@ def load_optimizer_state(path: str | Path, payload: dict, map_location: str | to
 
 
 def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path | None = None,
-                   runtime_from: str | Path | None = None, runtime: str | None = None) -> Path:
+                   runtime_from: str | Path | None = None, runtime: str | None = None,
+                   summary_from: str | Path | None = None) -> Path:
     """Write the inference part of a training checkpoint (the weights' moving average when it
     keeps one, else the model; config, step) to ``out``, and ``summary`` (default: ``<out>.md``): the
     config, and when the checkpoint's folder has a TensorBoard log, the wall time of training
     and a summary of the log, both up to the checkpoint's step. A HyperBones model also keeps
     the ``RuntimeConfig`` it is meant to run with (``export_runtime_config``: by default the
-    checkpoint's, else the shipped model's), written into the summary too."""
+    checkpoint's, else the shipped model's), written into the summary too.
+
+    ``checkpoint`` may be an exported model itself: exported again, its weights, config and
+    step stay as they are and only the runtime settings change; with no log beside it, the
+    training part of its own summary (``summary_from``, default ``<checkpoint>.md``) is carried over."""
     from hyperbones.training.summary import read_log, training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
@@ -118,12 +123,33 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
                 f"pauses over 10 minutes left out).\n\nTraining log (medians per stretch of steps):\n\n"
                 f"{training_summary(log, up_to=payload['step'])}\n")
     else:
-        text = "(no TensorBoard log beside the checkpoint)\n"
+        text = _carried_training_text(checkpoint, summary_from)
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
     with atomic_path(Path(summary) if summary else out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
                        f"Config (saved in the checkpoint):\n\n```\n{_config_text(payload['config'])}```\n\n{runtime_text}{text}")
     return out
+
+
+# Where the training part of an export's summary starts (``export_weights`` writes one of the two).
+_TRAINING_TEXT_STARTS = ("Training took ", "(no TensorBoard log beside the checkpoint)")
+
+
+def _carried_training_text(checkpoint: str | Path, summary_from: str | Path | None) -> str:
+    """The training part of the summary of a checkpoint that has no TensorBoard log beside it:
+    taken from its own summary (``summary_from``, default ``<checkpoint>.md`` when there is one),
+    so a model exported again with other runtime settings keeps the record of its training."""
+    source = Path(summary_from) if summary_from is not None else Path(checkpoint).with_suffix(".md")
+    if not source.is_file():
+        if summary_from is not None:
+            raise InputFileError(source, "missing (--summary-from: the summary of the model exported again)")
+        return f"{_TRAINING_TEXT_STARTS[1]}\n"
+    text = source.read_text(encoding="utf-8", errors="replace")
+    starts = [index for index in (text.find(marker) for marker in _TRAINING_TEXT_STARTS) if index >= 0]
+    if not starts:
+        raise InputFileError(source, "holds no training summary (not one that hyperbones export wrote)")
+    return (f"Exported from {checkpoint}, itself an export (weights, config and step unchanged); its "
+            f"training as {source} records it:\n\n{text[min(starts):]}")
 
 
 def export_runtime_config(payload: dict, checkpoint: str | Path, runtime_from: str | Path | None = None,
