@@ -148,8 +148,8 @@ def test_the_shipped_model_carries_its_runtime_config():
     from hyperbones.runtime.simulator import runtime_config_of
 
     payload = hyperbones_payload()
-    # the validated choices: docs/experiments/*-realtime-runtime*.md
-    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=32, bfloat16=True, projection_iterations=4,
+    # the validated choices: docs/experiments/*-realtime-runtime*.md, *-conv-mlp-24.md
+    assert runtime_config_of(payload) == RuntimeConfig(uv_resolution=24, bfloat16=True, projection_iterations=4,
                                                        round_search_gap=0.003, proxy_vertices=1000)
     for bad in ({**payload["runtime_config"], "speed": 2}, {"follow": "fast"}, [0.6]):
         with pytest.raises(InputFileError, match="model.pt: .*runtime_config") as error:
