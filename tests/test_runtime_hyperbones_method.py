@@ -116,14 +116,14 @@ def test_eval_takes_the_uv_resolution(joint_checkpoint, tmp_path, monkeypatch):
     monkeypatch.setattr(UvRaster, "build", classmethod(recording_build))
     out = tmp_path / "eval"
     assert main(["eval", "--methods", "lbs,hyperbones-raw", "--garments", "tshirt", "--motions", "walk",
-                 "--frames", "4", "--vertices", "1000", "--uv-resolution", "24", "--checkpoint", str(joint_checkpoint),
+                 "--frames", "4", "--vertices", "1000", "--uv-resolution", "40", "--checkpoint", str(joint_checkpoint),
                  "--device", "cpu", "--out", str(out), "--quiet"]) == 0
     methods = [run["method"] for run in json.loads((out / "report.json").read_text())]
     assert methods == ["lbs", "hyperbones-raw"]
-    assert built == [24]  # one identity's maps, for hyperbones-raw alone, at the resolution asked for
+    assert built == [40]  # one identity's maps, for hyperbones-raw alone, at the resolution asked for
     run_simulation("hyperbones-raw", "tshirt", "walk", vertices=1000, frames=2, checkpoint=str(joint_checkpoint),
                    device="cpu")
-    assert built[1:] == [shipped_runtime_config().uv_resolution or 16] and built[1] != 24
+    assert built[1:] == [shipped_runtime_config().uv_resolution or 16] and built[1] != 40
 
 
 def test_the_shipped_model_loads_safely_and_beats_lbs_on_a_walk():
