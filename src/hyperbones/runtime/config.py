@@ -31,8 +31,8 @@ class RuntimeConfig:
     """R of the UV images the Conv-MLP runs on (0: the model's training resolution). The
     Conv-MLP is fully convolutional and its output is sampled bilinearly, so a coarser image
     costs a quarter per halving with the same per-vertex detail wherever texels still cover it.
-    The shipped model stores 32 (40 until 2026-11-29; on validation the means move by 0.4 % or
-    less, docs/experiments/*-runtime-push-out-one-launch.md)."""
+    The shipped model stores 24 (40 until 2026-11-29, 32 until 2026-11-30; on validation the
+    means move by 0.4 % or less, docs/experiments/*-runtime-push-out-one-launch.md, *-conv-mlp-24.md)."""
     conv_mlp: bool = True
     """Add Module A's second stage (the Conv-MLP's displacement, read back from the UV image) to
     the garment its bones skin; off: the bones' garment alone, and no UV stage runs. The
