@@ -203,4 +203,6 @@ def test_an_exported_model_exported_again_keeps_its_weights_and_its_training_rec
     assert main(["export", str(tmp_path / "first.pt"), "--out", str(tmp_path / "bad.pt"),
                  "--summary-from", str(tmp_path / "other.md")]) == 2
     assert "holds no training summary" in capsys.readouterr().err
+    assert main(["export", str(whole), "--out", str(tmp_path / "bad.pt"), "--summary-from", str(tmp_path / "first.md")]) == 2
+    assert f"{whole}: --summary-from is for an exported HyperBones model" in capsys.readouterr().err
     assert not (tmp_path / "bad.pt").exists() and not (tmp_path / "bad.md").exists()

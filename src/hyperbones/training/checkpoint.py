@@ -99,9 +99,9 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
     the ``RuntimeConfig`` it is meant to run with (``export_runtime_config``: by default the
     checkpoint's, else the shipped model's), written into the summary too.
 
-    ``checkpoint`` may be an exported model itself: exported again, its weights, config and
-    step stay as they are and only the runtime settings change; with no log beside it, the
-    training part of its own summary (``summary_from``, default ``<checkpoint>.md``) is carried over."""
+    ``checkpoint`` may be an exported HyperBones model itself: exported again, its weights,
+    config and step stay as they are and only the runtime settings change; the training part of
+    its own summary (``summary_from``, default ``<checkpoint>.md``) is carried over."""
     from hyperbones.training.summary import read_log, training_seconds, training_summary
 
     payload = load_checkpoint(checkpoint)
@@ -114,16 +114,23 @@ def export_weights(checkpoint: str | Path, out: str | Path, summary: str | Path 
     elif runtime_from is not None or runtime:
         raise ParameterError(f"{checkpoint}: a teacher has no runtime settings (--runtime-from, --runtime are for "
                              "a HyperBones model)")
-    out = save_checkpoint(out, slim)
+    # An exported model (export's own output: no moving average kept, runtime settings stored)
+    # has no log of its own beside it; its summary records its training.
+    exported = "ema" not in payload and "runtime_config" in payload
     log_dir = Path(checkpoint).parent / "tensorboard"
-    if log_dir.exists():
+    if exported:
+        text = _carried_training_text(checkpoint, summary_from)
+    elif summary_from is not None:
+        raise ParameterError(f"{checkpoint}: --summary-from is for an exported HyperBones model, not a run's checkpoint")
+    elif log_dir.exists():
         log = read_log(log_dir)
         hours = training_seconds(log, up_to=payload["step"]) / 3600
         text = (f"Training took {hours:.1f} h of wall-clock time to this step (the gaps between logged steps; "
                 f"pauses over 10 minutes left out).\n\nTraining log (medians per stretch of steps):\n\n"
                 f"{training_summary(log, up_to=payload['step'])}\n")
     else:
-        text = _carried_training_text(checkpoint, summary_from)
+        text = f"{_TRAINING_TEXT_STARTS[1]}\n"
+    out = save_checkpoint(out, slim)
     parameters = sum(v.numel() for v in payload["model"].values() if hasattr(v, "numel"))
     with atomic_path(Path(summary) if summary else out.with_suffix(".md")) as tmp:
         tmp.write_text(f"# {out.name}\n\nStep {payload['step']}, {parameters:,} numbers in the state dict. "
@@ -136,9 +143,9 @@ _TRAINING_TEXT_STARTS = ("Training took ", "(no TensorBoard log beside the check
 
 
 def _carried_training_text(checkpoint: str | Path, summary_from: str | Path | None) -> str:
-    """The training part of the summary of a checkpoint that has no TensorBoard log beside it:
-    taken from its own summary (``summary_from``, default ``<checkpoint>.md`` when there is one),
-    so a model exported again with other runtime settings keeps the record of its training."""
+    """The training part of an exported model's summary, taken from its own summary
+    (``summary_from``, default ``<checkpoint>.md`` when there is one), so a model exported again
+    with other runtime settings keeps the record of its training."""
     source = Path(summary_from) if summary_from is not None else Path(checkpoint).with_suffix(".md")
     if not source.is_file():
         if summary_from is not None:
