@@ -233,6 +233,14 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert mixed.physics.draped is True
     assert torch.equal(mixed.physics.garment.vertices, saved["start"])  # the saved start: nothing draped again
     assert not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
+    # Its drift (logged) is measured from the drape it started from, skinned along, not from the
+    # rest shape (which a draped long skirt hangs ~14 cm RMS from: every draw refused for its gap).
+    logged = json.loads((bank / DRAW_LOG).read_text().splitlines()[-1])
+    assert logged["file"] == draped_file.name
+    from_drape = drift(mixed.positions, mixed.physics.skin(mixed.skinning, mixed.physics.garment.vertices))
+    from_rest = drift(mixed.positions, mixed.physics.skin(mixed.skinning))
+    assert (logged["rise_m"], logged["gap_m"]) == pytest.approx(from_drape, abs=1e-3), (from_rest, from_drape)  # float16
+    assert abs(from_rest[1] - logged["gap_m"]) > 3e-3, (from_rest, from_drape)
     # A draped file from before starts were saved is draped again, to the same start (cached).
     old_file = tmp_path / "old" / "rollout-s4-00000.pt"
     old_file.parent.mkdir()

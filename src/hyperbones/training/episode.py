@@ -57,9 +57,12 @@ class Identity:
         return cls(name, body, rest, topology, skin_weights, StrainLimiter.for_cloth(rest, topology.pinned_mask),
                    garment, resolution, draped)
 
-    def skin(self, skinning_transforms: torch.Tensor) -> torch.Tensor:
-        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS, on their device."""
-        return linear_blend_skinning(self.rest.rest_vertices.to(skinning_transforms),
+    def skin(self, skinning_transforms: torch.Tensor, vertices: torch.Tensor | None = None) -> torch.Tensor:
+        """(T,31,4,4) body skinning transforms -> (T,V,3) the garment by LBS, on their device:
+        its rest shape, or ``vertices`` (V,3), the same garment elsewhere on the canonical body
+        (its drape)."""
+        canonical = self.rest.rest_vertices if vertices is None else vertices
+        return linear_blend_skinning(canonical.to(skinning_transforms),
                                      self.skin_weights.to(skinning_transforms), skinning_transforms)
 
 

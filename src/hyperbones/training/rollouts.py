@@ -6,9 +6,10 @@ A learns C's lag, swing and settling along a whole motion, not only a few steps 
 pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the current C
 (or, with a bank, by a saved one: ``RolloutCache``).
 
-A rollout is kept only if, over its last third, the garment stays near its skinned pose
-(``drift``: its mean height above it within ``max_rise``, its RMS distance within
-``max_gap``), and if few of its vertex-frames above the hips came off the body (``detachment``:
+A rollout is kept only if, over its last third, the garment stays near where it started,
+skinned along (``drift``: its mean height above it within ``max_rise``, its RMS distance
+within ``max_gap``; a draped start is skinned from its drape, not from the rest shape, which a
+long skirt hangs 10-20 cm away from), and if few of its vertex-frames above the hips came off the body (``detachment``:
 at most ``max_detached_pct``); the teacher lets some garments creep up the body or slide off, and
 such a rollout would teach A a wrong place for the garment. A refused one is replaced by a
 new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
@@ -225,7 +226,8 @@ class RolloutCache:
             positions = method.run(posed)
         finally:
             teacher.train(was_training)
-        rise, gap = drift(positions, identity.skin(posed.skinning_transforms))
+        # Drift from where it started: the drape, skinned along, for a draped start.
+        rise, gap = drift(positions, identity.skin(posed.skinning_transforms, garment.vertices))
         detached = self.detachment(identity, positions, posed.vertices)
         return SimulatedRollout(identity, window.name, window.joint_rotations, root, posed, positions, rise, gap,
                                 detached, drawn - started, time.perf_counter() - drawn, drawn_cpu - started_cpu,
