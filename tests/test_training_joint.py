@@ -234,7 +234,7 @@ def test_a_rollout_bank_is_written_resumed_and_trained_from(tmp_path, body, caps
     assert torch.equal(mixed.physics.garment.vertices, saved["start"])  # the saved start: nothing draped again
     assert not torch.equal(mixed.physics.garment.vertices, mixed.physics.rest.rest_vertices)
     # Its drift (logged) is measured from the drape it started from, skinned along, not from the
-    # rest shape (which a draped long skirt hangs ~14 cm RMS from: every draw refused for its gap).
+    # rest shape (which a draped long skirt hangs ~14 cm RMS from: nine draws in ten were refused).
     logged = json.loads((bank / DRAW_LOG).read_text().splitlines()[-1])
     assert logged["file"] == draped_file.name
     from_drape = drift(mixed.positions, mixed.physics.skin(mixed.skinning, mixed.physics.garment.vertices))

@@ -9,8 +9,8 @@ pose. Every ``refresh_every`` steps the oldest rollout is replaced by one of the
 A rollout is kept only if, over its last third, the garment stays near where it started,
 skinned along (``drift``: its mean height above it within ``max_rise``, its RMS distance
 within ``max_gap``; a draped start is skinned from its drape, not from the rest shape, which a
-long skirt hangs 10-20 cm away from), and if few of its vertex-frames above the hips came off the body (``detachment``:
-at most ``max_detached_pct``); the teacher lets some garments creep up the body or slide off, and
+draped long skirt hangs ~14 cm RMS from), and if few of its vertex-frames above the hips came
+off the body (``detachment``: at most ``max_detached_pct``); the teacher lets some garments creep up the body or slide off, and
 such a rollout would teach A a wrong place for the garment. A refused one is replaced by a
 new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
 """
