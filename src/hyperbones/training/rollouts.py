@@ -10,9 +10,10 @@ A rollout is kept only if, over its last third, the garment stays near where it 
 skinned along (``drift``: its mean height above it within ``max_rise``, its RMS distance
 within ``max_gap``; a draped start is skinned from its drape, not from the rest shape, which a
 draped long skirt hangs ~14 cm RMS from), and if few of its vertex-frames above the hips came
-off the body (``detachment``: at most ``max_detached_pct``); the teacher lets some garments creep up the body or slide off, and
-such a rollout would teach A a wrong place for the garment. A refused one is replaced by a
-new draw (up to ``MAX_DRAWS`` in all); a refused bank file is skipped.
+off the body (``detachment``: at most ``max_detached_pct``); the teacher lets some garments
+creep up the body or slide off, and such a rollout would teach A a wrong place for the
+garment. A refused one is replaced by a new draw (up to ``MAX_DRAWS`` in all); a refused bank
+file is skipped.
 """
 
 from __future__ import annotations
