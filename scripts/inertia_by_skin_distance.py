@@ -15,17 +15,17 @@ import argparse
 from pathlib import Path
 
 import numpy as np
+import torch
 from scipy.spatial import cKDTree
 
 from hyperbones.errors import HyperbonesError, InputFileError
+from hyperbones.physics.cloth import ClothRest
 
 
 def vertex_masses(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """(V,3), (F,3) -> (V,) a third of each adjacent triangle's area, scaled to sum to 1 kg."""
-    corners = vertices[faces]
-    areas = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-    masses = np.zeros(len(vertices))
-    np.add.at(masses, faces.ravel(), np.repeat(areas / 3.0, 3))
+    """(V,3), (F,3) -> (V,) the cloth's lumped masses (``ClothRest``: a third of each adjacent
+    triangle's), scaled to sum to 1 kg."""
+    masses = ClothRest.from_mesh(torch.from_numpy(vertices), torch.from_numpy(faces).long()).vertex_masses.numpy()
     return masses / masses.sum()
 
 
